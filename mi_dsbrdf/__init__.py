@@ -1,0 +1,26 @@
+"""mi-dsbrdf: reflectance (DSBRDF) and illumination recovery in Mitsuba 3.
+
+Importing the package
+  1. points Dr.Jit at a libLLVM >= 16 (and raises BackendError if there is none),
+  2. selects the ``llvm_ad_rgb`` variant when none is set,
+  3. registers the ``dsbrdf`` and ``merl`` BSDF plugins for the active variant,
+     and again whenever ``mi.set_variant`` switches variant.
+"""
+from .backend import select_libllvm as _select_libllvm
+
+_select_libllvm()
+
+from . import backend as _backend  # noqa: E402
+
+_backend.ensure_variant()
+_backend.register_plugins()
+_backend.install_variant_callback()
+
+from .dsbrdf import Material  # noqa: E402
+from .errors import (BackendError, MaterialError, MeasuredFileError, MiDsbrdfError,  # noqa: E402
+                     ModelError, VariantError)
+from .library import load_material  # noqa: E402
+
+__version__ = "0.1.0"
+__all__ = ["Material", "load_material", "BackendError", "MaterialError", "MeasuredFileError",
+           "MiDsbrdfError", "ModelError", "VariantError"]

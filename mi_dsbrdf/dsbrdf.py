@@ -1,0 +1,210 @@
+"""The Directional-Statistics BRDF (paper Eq. 4), colour-separated:
+
+    rho_lambda(theta_d, theta_h) = sum_r c_{r,lambda} (exp[kappa_r(theta_d) cos^{gamma_r(theta_d)} theta_h] - 1)
+
+with R lobes, each a pair of log-spline curves (:mod:`mi_dsbrdf.curves`) and a
+chromaticity c_r (non-negative RGB weights that sum to one; the magnitude lives
+in kappa). Values are in 1/sr.
+
+:func:`lobe_rgb` is the formula, written once for numpy and Dr.Jit: the numpy
+float64 evaluation (:meth:`Material.eval`) is the reference the tests hold the
+Dr.Jit plugin (``plugins/dsbrdf.py``) to.
+
+Numerical guards, identical in both backends: log kappa <= log 85 (exp overflows
+float32 past 88), gamma in [1e-4, 1e6], cos theta_h >= 1e-30 (finite gradients
+at theta_h = 90 deg), and a stable expm1 for tiny kappa.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+
+from .curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
+from .errors import MaterialError
+from .xp import expm1, ops
+
+MAX_LOBES = 3
+KAPPA_MAX = 85.0
+GAMMA_MIN, GAMMA_MAX = 1e-4, 1e6
+COS_H_MIN = 1e-30
+LOG_KAPPA_MAX = math.log(KAPPA_MAX)
+LOG_GAMMA_MIN, LOG_GAMMA_MAX = math.log(GAMMA_MIN), math.log(GAMMA_MAX)
+LOG_COS_H_MIN = math.log(COS_H_MIN)
+FORMAT = "mi-dsbrdf/material"
+
+
+def lobe_curves(theta_d, log_kappa, log_gamma, knots=DEFAULT_KNOTS):
+    """kappa_r(theta_d), gamma_r(theta_d) for every lobe (guards applied).
+
+    ``log_kappa``, ``log_gamma``: per lobe, 6 control values (numpy floats or
+    Dr.Jit scalars). Returns two lists of R arrays shaped like ``theta_d``.
+    """
+    o = ops(theta_d)
+    basis = spline_basis(theta_d, knots)
+    kappa = [o.exp(o.fmin(eval_log_curve(basis, a), LOG_KAPPA_MAX)) for a in log_kappa]
+    gamma = [o.exp(o.clip(eval_log_curve(basis, g), LOG_GAMMA_MIN, LOG_GAMMA_MAX)) for g in log_gamma]
+    return kappa, gamma
+
+
+def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS):
+    """Eq. 4: the RGB DSBRDF value as three arrays (1/sr).
+
+    ``log_cos_h``: log cos theta_h (>= log 1e-30); ``theta_d`` in radians.
+    """
+    o = ops(log_cos_h, theta_d)
+    log_cos_h = o.fmax(log_cos_h, LOG_COS_H_MIN)
+    kappa, gamma = lobe_curves(theta_d, log_kappa, log_gamma, knots)
+    rgb = [0.0, 0.0, 0.0]
+    for k, g, c in zip(kappa, gamma, chromaticity):
+        lobe = expm1(k * o.exp(g * log_cos_h))
+        rgb = [acc + c_l * lobe for acc, c_l in zip(rgb, c)]
+    return rgb
+
+
+class Material:
+    """A DSBRDF material: R lobes of log-spline kappa/gamma curves + chromaticity.
+
+    Parameters
+    ----------
+    log_kappa, log_gamma : (R, 6) array_like
+        Spline control values of log kappa_r and log gamma_r.
+    chromaticity : (R, 3) array_like
+        Per-lobe RGB chromaticity, non-negative, each row summing to one.
+    knots : 9 floats, optional
+        Spline knot vector on [0, pi/2].
+    name : str, optional
+    psi : array_like, optional
+        Basis coefficients, when the material came from a learned basis
+        (kept for provenance and as the starting point of refits).
+    """
+
+    def __init__(self, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS, name=None, psi=None):
+        self.log_kappa = _as_lobe_array(log_kappa, N_CONTROL, "log_kappa")
+        self.log_gamma = _as_lobe_array(log_gamma, N_CONTROL, "log_gamma")
+        self.chromaticity = _as_lobe_array(chromaticity, 3, "chromaticity")
+        r = self.log_kappa.shape[0]
+        if not (1 <= r <= MAX_LOBES):
+            raise MaterialError("a material has 1 to %d lobes, got %d" % (MAX_LOBES, r))
+        if self.log_gamma.shape[0] != r or self.chromaticity.shape[0] != r:
+            raise MaterialError("log_kappa, log_gamma and chromaticity must have one row per lobe: "
+                                "got %d, %d and %d rows" % (r, self.log_gamma.shape[0], self.chromaticity.shape[0]))
+        try:
+            self.knots = check_knots(knots)
+        except ValueError as e:
+            raise MaterialError(str(e)) from None
+        if np.any(self.log_kappa > LOG_KAPPA_MAX + 1e-9):
+            raise MaterialError("kappa must be <= %g (float32 exp overflows past 88); largest control value is %g"
+                                % (KAPPA_MAX, math.exp(self.log_kappa.max())))
+        if np.any(self.log_gamma < LOG_GAMMA_MIN - 1e-9) or np.any(self.log_gamma > LOG_GAMMA_MAX + 1e-9):
+            raise MaterialError("gamma control values must lie in [%g, %g], got [%g, %g]" % (
+                GAMMA_MIN, GAMMA_MAX, math.exp(self.log_gamma.min()), math.exp(self.log_gamma.max())))
+        check_chromaticity(self.chromaticity)
+        self.name = name
+        self.psi = None if psi is None else np.asarray(psi, dtype=np.float64).reshape(-1)
+
+    # --- construction ------------------------------------------------------
+    @classmethod
+    def from_curves(cls, kappa, gamma, chromaticity, **kw):
+        """From positive kappa/gamma control values (linear space, (R, 6))."""
+        kappa = _as_lobe_array(kappa, N_CONTROL, "kappa")
+        gamma = _as_lobe_array(gamma, N_CONTROL, "gamma")
+        if np.any(kappa <= 0):
+            raise MaterialError("kappa control values must be > 0, got min %g" % kappa.min())
+        if np.any(gamma <= 0):
+            raise MaterialError("gamma control values must be > 0, got min %g" % gamma.min())
+        return cls(np.log(kappa), np.log(gamma), chromaticity, **kw)
+
+    @classmethod
+    def from_basis(cls, basis, psi, chromaticity, **kw):
+        """From coefficients ``psi`` of a learned :class:`~mi_dsbrdf.curves.CurveBasis`."""
+        ctrl = basis.control_values(psi)
+        return cls(ctrl[:, 0], ctrl[:, 1], chromaticity, knots=basis.knots, psi=psi, **kw)
+
+    @property
+    def n_lobes(self) -> int:
+        return self.log_kappa.shape[0]
+
+    # --- evaluation (float64 reference) -----------------------------------
+    def curves(self, theta_d):
+        """(kappa, gamma), each (N, R) float64, at angles ``theta_d`` (radians)."""
+        th = np.asarray(theta_d, dtype=np.float64).reshape(-1)
+        kappa, gamma = lobe_curves(th, self.log_kappa, self.log_gamma, self.knots)
+        return np.stack(kappa, axis=-1), np.stack(gamma, axis=-1)
+
+    def eval(self, theta_h, theta_d) -> np.ndarray:
+        """BRDF values (N, 3) float64 in 1/sr at half/difference angles (radians)."""
+        th = np.asarray(theta_h, dtype=np.float64).reshape(-1)
+        td = np.asarray(theta_d, dtype=np.float64).reshape(-1)
+        if th.shape != td.shape:
+            raise ValueError("theta_h and theta_d must have the same length, got %d and %d" % (th.size, td.size))
+        log_cos_h = np.log(np.maximum(np.cos(th), COS_H_MIN))
+        return np.stack(lobe_rgb(log_cos_h, td, self.log_kappa, self.log_gamma, self.chromaticity, self.knots), -1)
+
+    # --- files ---------------------------------------------------------------
+    def to_dict(self) -> dict:
+        d = {"format": FORMAT, "version": 1, "name": self.name, "lobes": self.n_lobes,
+             "knots": list(self.knots), "log_kappa": self.log_kappa.tolist(),
+             "log_gamma": self.log_gamma.tolist(), "chromaticity": self.chromaticity.tolist()}
+        if self.psi is not None:
+            d["psi"] = self.psi.tolist()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "material"):
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise MaterialError("%s is not a mi-dsbrdf material (expected \"format\": %r)" % (source, FORMAT))
+        missing = [k for k in ("log_kappa", "log_gamma", "chromaticity") if k not in d]
+        if missing:
+            raise MaterialError("%s lacks %s" % (source, ", ".join(missing)))
+        try:
+            return cls(d["log_kappa"], d["log_gamma"], d["chromaticity"], knots=d.get("knots", DEFAULT_KNOTS),
+                       name=d.get("name"), psi=d.get("psi"))
+        except MaterialError as e:
+            raise MaterialError("%s: %s" % (source, e)) from None
+
+    def save(self, path) -> None:
+        with open(path, "w") as f:
+            json.dump(self.to_dict(), f, indent=1)
+
+    @classmethod
+    def load(cls, path):
+        path = os.fspath(path)
+        try:
+            with open(path) as f:
+                d = json.load(f)
+        except FileNotFoundError:
+            raise MaterialError("material file %s does not exist" % path) from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise MaterialError("material file %s is unreadable: %s" % (path, e)) from None
+        return cls.from_dict(d, source=path)
+
+    def __repr__(self):
+        return "Material(name=%r, lobes=%d)" % (self.name, self.n_lobes)
+
+
+def check_chromaticity(c, tol=1e-4) -> np.ndarray:
+    """Raise MaterialError unless every row is >= 0 and sums to one (within tol)."""
+    c = np.asarray(c, dtype=np.float64)
+    if np.any(c < 0):
+        raise MaterialError("chromaticity must be non-negative, got %s" % np.round(c, 6).tolist())
+    sums = c.sum(axis=-1)
+    if np.any(np.abs(sums - 1.0) > tol):
+        raise MaterialError("each lobe's chromaticity must sum to 1, got sums %s" % np.round(sums, 6).tolist())
+    return c
+
+
+def _as_lobe_array(values, width, what) -> np.ndarray:
+    try:
+        a = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise MaterialError("%s must be numbers, got %r" % (what, values)) from None
+    if a.ndim == 1 and a.size == width:
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] != width:
+        raise MaterialError("%s must have %d values per lobe, got shape %s" % (what, width, a.shape))
+    if not np.all(np.isfinite(a)):
+        raise MaterialError("%s must be finite" % what)
+    return a

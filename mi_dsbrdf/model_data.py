@@ -1,0 +1,81 @@
+"""The learned reflectance model file: curve bases, priors, material library.
+
+One ``.npz`` file (shipped as ``mi_dsbrdf/data/model.npz`` once built by
+``mi-dsbrdf build-model``) with at least
+
+    knots            (9,)          spline knots of all curves
+    mean             (R, 2, 6)     mean log-curve control values (b_mu, Eq. 2-3)
+    bases            (k, R, 2, 6)  basis functions b_i
+    library_names    (M,)          names of the library materials
+    library_psi      (M, k)        their basis coefficients
+    library_chroma   (M, R, 3)     their lobe chromaticities
+
+and the priors' arrays (read by :mod:`mi_dsbrdf.priors`).
+"""
+from __future__ import annotations
+
+import functools
+import os
+
+import numpy as np
+
+from .curves import CurveBasis
+from .dsbrdf import Material
+from .errors import MaterialError, ModelError
+
+SHIPPED = os.path.join(os.path.dirname(__file__), "data", "model.npz")
+REQUIRED = ("knots", "mean", "bases", "library_names", "library_psi", "library_chroma")
+
+
+class ReflectanceModel:
+    """Curve basis + library (+ priors) loaded from a model file."""
+
+    def __init__(self, arrays: dict, source: str = "model"):
+        missing = [k for k in REQUIRED if k not in arrays]
+        if missing:
+            raise ModelError("%s lacks the arrays %s" % (source, ", ".join(missing)))
+        try:
+            self.basis = CurveBasis(arrays["mean"], arrays["bases"], arrays["knots"])
+        except ValueError as e:
+            raise ModelError("%s: %s" % (source, e)) from None
+        names = [str(n) for n in arrays["library_names"]]
+        psi = np.asarray(arrays["library_psi"], dtype=np.float64)
+        chroma = np.asarray(arrays["library_chroma"], dtype=np.float64)
+        m, k, r = len(names), self.basis.n_bases, self.basis.n_lobes
+        if psi.shape != (m, k) or chroma.shape != (m, r, 3):
+            raise ModelError("%s: library_psi must be (%d, %d) and library_chroma (%d, %d, 3), got %s and %s"
+                             % (source, m, k, m, r, psi.shape, chroma.shape))
+        self.library = {n: (psi[i], chroma[i]) for i, n in enumerate(names)}
+        self.arrays = arrays
+        self.source = source
+
+    def mean_material(self) -> Material:
+        """All coefficients zero; grey chromaticity."""
+        return Material.from_basis(self.basis, np.zeros(self.basis.n_bases),
+                                   np.full((self.basis.n_lobes, 3), 1 / 3), name="mean")
+
+    def library_material(self, name) -> Material:
+        psi, chroma = self.library[name]
+        return Material.from_basis(self.basis, psi, chroma, name=name)
+
+
+def load_model(path) -> ReflectanceModel:
+    """Read and validate a model file; ModelError names what is wrong."""
+    path = os.fspath(path)
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            arrays = {k: f[k] for k in f.files}
+    except FileNotFoundError:
+        raise ModelError("model file %s does not exist" % path) from None
+    except (OSError, ValueError, EOFError) as e:
+        raise ModelError("model file %s is unreadable: %s" % (path, e)) from None
+    try:
+        return ReflectanceModel(arrays, source=path)
+    except MaterialError as e:
+        raise ModelError("%s: %s" % (path, e)) from None
+
+
+@functools.lru_cache(maxsize=1)
+def shipped_model():
+    """The model shipped with the package, or None when none is installed."""
+    return load_model(SHIPPED) if os.path.exists(SHIPPED) else None
