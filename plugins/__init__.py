@@ -9,7 +9,7 @@ statement runs, so the plugin modules are (re)loaded once per variant.
 """
 import importlib
 
-_MODULES = {"dsbrdf": ("dsbrdf", "DSBRDF")}
+_MODULES = {"dsbrdf": ("dsbrdf", "DSBRDF"), "merl": ("merl", "MeasuredBSDF")}
 _cache: dict = {}
 
 
