@@ -1,0 +1,37 @@
+"""Forward rendering of scenes to EXR with PNG previews."""
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+
+def render_scene(scene_file, spp=None, **params) -> np.ndarray:
+    """Render a scene XML (with ``<default>`` overrides ``params``) to (H, W, 3) float32."""
+    import mitsuba as mi
+    scene = mi.load_file(os.fspath(scene_file), **{k: str(v) for k, v in params.items()})
+    img = mi.render(scene, spp=spp or 0)
+    img = np.array(img, dtype=np.float32)
+    if not np.all(np.isfinite(img)):
+        raise FloatingPointError("render of %s produced non-finite pixels" % scene_file)
+    return img
+
+
+def save_preview(image, path, exposure=0.0) -> None:
+    """sRGB PNG of a linear HDR image (scaled by 2^exposure, clipped)."""
+    import mitsuba as mi
+    img = np.ascontiguousarray(np.asarray(image, dtype=np.float32) * 2.0 ** exposure)
+    bmp = mi.Bitmap(img, mi.Bitmap.PixelFormat.RGB)
+    bmp.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(os.fspath(path))
+
+
+def render_to_files(scene_file, out_stem, spp=None, **params) -> dict:
+    """Render and write ``<out_stem>.exr`` and ``<out_stem>.png``; returns paths and time."""
+    from .illumination import write_exr
+    t0 = time.perf_counter()
+    img = render_scene(scene_file, spp=spp, **params)
+    seconds = time.perf_counter() - t0
+    write_exr(out_stem + ".exr", img)
+    save_preview(img, out_stem + ".png")
+    return {"exr": out_stem + ".exr", "png": out_stem + ".png", "seconds": seconds}

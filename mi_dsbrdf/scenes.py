@@ -1,0 +1,52 @@
+"""The example scenes in ``scenes/`` and the assets they use.
+
+``python -m mi_dsbrdf.scenes`` regenerates the committed assets:
+``scenes/meshes/torus.ply`` (trimesh; a non-convex shape that sees only part of
+the normal sphere from the camera and shadows itself) and
+``scenes/textures/sky.exr`` (:func:`mi_dsbrdf.illumination.procedural_sky`).
+"""
+from __future__ import annotations
+
+import os
+
+SCENE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+SCENES = {
+    "sphere_envmap": "sphere_envmap.xml",
+    "sphere_directional": "sphere_directional.xml",
+    "torus_envmap": "torus_envmap.xml",
+}
+
+
+def scene_path(name_or_path: str) -> str:
+    """Path of a shipped scene by name (``sphere_envmap`` ...) or a given path."""
+    if name_or_path in SCENES:
+        return os.path.join(SCENE_DIR, SCENES[name_or_path])
+    if not os.path.exists(name_or_path):
+        raise FileNotFoundError("no scene %r: give a path or one of %s" % (name_or_path, ", ".join(SCENES)))
+    return name_or_path
+
+
+def make_torus(path, major=0.7, minor=0.3, sections=96, tube=48) -> None:
+    """Write a torus (axis tilted 60 deg from the view axis) with vertex normals as PLY."""
+    import numpy as np
+    import trimesh
+    mesh = trimesh.creation.torus(major_radius=major, minor_radius=minor,
+                                  major_sections=sections, minor_sections=tube)
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(60), [1, 0, 0]))
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    mesh.export(path, encoding="binary", vertex_normal=True)
+
+
+def build_assets(scene_dir: str = SCENE_DIR) -> list:
+    from .illumination import procedural_sky, write_exr
+    torus = os.path.join(scene_dir, "meshes", "torus.ply")
+    sky = os.path.join(scene_dir, "textures", "sky.exr")
+    make_torus(torus)
+    write_exr(sky, procedural_sky())
+    return [torus, sky]
+
+
+if __name__ == "__main__":
+    import mi_dsbrdf  # noqa: F401  (variant, for the EXR writer)
+    for p in build_assets():
+        print("wrote", p)
