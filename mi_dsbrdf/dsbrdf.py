@@ -64,6 +64,13 @@ def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAU
     return rgb
 
 
+def log_cos_from_angle(theta_h) -> np.ndarray:
+    """float64 log cos theta_h, precise near 0 (log1p form), >= log 1e-30."""
+    th = np.asarray(theta_h, dtype=np.float64)
+    near = np.log1p(-np.sin(np.minimum(th, math.pi / 4)) ** 2) / 2
+    return np.where(th < math.pi / 4, near, np.log(np.maximum(np.cos(th), COS_H_MIN)))
+
+
 class Material:
     """A DSBRDF material: R lobes of log-spline kappa/gamma curves + chromaticity.
 
@@ -140,7 +147,7 @@ class Material:
         td = np.asarray(theta_d, dtype=np.float64).reshape(-1)
         if th.shape != td.shape:
             raise ValueError("theta_h and theta_d must have the same length, got %d and %d" % (th.size, td.size))
-        log_cos_h = np.log(np.maximum(np.cos(th), COS_H_MIN))
+        log_cos_h = log_cos_from_angle(th)
         return np.stack(lobe_rgb(log_cos_h, td, self.log_kappa, self.log_gamma, self.chromaticity, self.knots), -1)
 
     # --- files ---------------------------------------------------------------

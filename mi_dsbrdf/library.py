@@ -11,7 +11,7 @@ import os
 import numpy as np
 
 from .curves import CurveBasis, N_CONTROL
-from .dsbrdf import Material
+from .dsbrdf import MAX_LOBES, Material
 from .errors import MaterialError
 
 
@@ -106,6 +106,8 @@ def material_from_params(params: dict):
             raise MaterialError("lobes=%s was given without kappa_<r>/gamma_<r> curves" % p["lobes"])
         return default_material(), None
     lobes = int(p.get("lobes", 1 + max(int(k.split("_")[1]) for k in explicit)))
+    if not 1 <= lobes <= MAX_LOBES:
+        raise MaterialError("a material has 1 to %d lobes, got %d" % (MAX_LOBES, lobes))
     kappa = np.stack([_floats(_need(p, "kappa_%d" % r), "kappa_%d" % r, N_CONTROL) for r in range(lobes)])
     gamma = np.stack([_floats(_need(p, "gamma_%d" % r), "gamma_%d" % r, N_CONTROL) for r in range(lobes)])
     extra = [k for k in explicit if int(k.split("_")[1]) >= lobes]

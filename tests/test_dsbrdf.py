@@ -1,0 +1,211 @@
+"""The DSBRDF model: float64 reference vs Dr.Jit kernel, stability, files, bad input."""
+import json
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_dsbrdf import Material, MaterialError, load_material
+from mi_dsbrdf.angles import from_half_diff, half_diff
+from mi_dsbrdf.dsbrdf import lobe_rgb, log_cos_from_angle
+
+GAMMAS = [1.0, 10.0, 100.0, 1e3, 1e4]
+KAPPAS = [1e-6, 1e-3, 0.1, 1.0, 10.0, 40.0, 80.0]
+TH = np.array([0.0, 1e-4, 1e-3, 0.01, 0.05, 0.2, 0.5, 1.0, 1.4, np.pi / 2])
+TD = np.array([0.0, 0.3, 0.8, 1.2, 1.5, np.pi / 2])
+CHROMA = [0.5, 0.3, 0.2]
+
+
+def constant_material(kappa, gamma):
+    return Material.from_curves([[kappa] * 6], [[gamma] * 6], [CHROMA])
+
+
+def varying_material():
+    return Material.from_curves([[0.5, 0.6, 0.8, 1.0, 2.0, 4.0], [20, 25, 30, 40, 60, 80]],
+                                [[1.0, 1.2, 1.5, 2.0, 2.5, 3.0], [5e3, 4e3, 2e3, 1e3, 500, 300]],
+                                [[0.6, 0.3, 0.1], [1 / 3, 1 / 3, 1 / 3]])
+
+
+def rel_err(got, ref):
+    """|got - ref| relative to |ref|, floored at 1e-7 of the material's peak."""
+    floor = 1e-7 * np.max(np.abs(ref)) + 1e-30
+    return np.abs(got - ref) / (np.abs(ref) + floor)
+
+
+def kernel_dr(material, log_cos_h, theta_d, grad=False):
+    """Evaluate lobe_rgb in Dr.Jit (float32) with the material's parameters."""
+    lk, lg, ch = (mi.Float(a.reshape(-1)) for a in (material.log_kappa, material.log_gamma, material.chromaticity))
+    if grad:
+        for p in (lk, lg, ch):
+            dr.enable_grad(p)
+    R = material.n_lobes
+    sc = lambda a, w: [[dr.gather(mi.Float, a, r * w + j) for j in range(w)] for r in range(R)]
+    rgb = lobe_rgb(mi.Float(log_cos_h), mi.Float(theta_d), sc(lk, 6), sc(lg, 6), sc(ch, 3), material.knots)
+    return rgb, (lk, lg, ch)
+
+
+def test_reference_matches_formula():
+    m = constant_material(3.0, 50.0)
+    th, td = np.array([0.0, 0.1, 0.4]), np.array([0.2, 0.5, 1.0])
+    expected = np.outer(np.expm1(3.0 * np.cos(th) ** 50), CHROMA)
+    np.testing.assert_allclose(m.eval(th, td), expected, rtol=1e-12)
+    kappa, gamma = varying_material().curves(np.array([0.0, np.pi / 2]))
+    np.testing.assert_allclose(kappa[:, 1], [20, 80], rtol=1e-12)   # clamped spline hits end controls
+    np.testing.assert_allclose(gamma[:, 1], [5e3, 300], rtol=1e-12)
+
+
+def test_kernel_matches_float64_reference_on_extreme_grid():
+    """gamma 1..1e4, kappa 1e-6..80, theta_h and theta_d including 0 and 90 deg."""
+    T, D = (a.reshape(-1) for a in np.meshgrid(TH, TD, indexing="ij"))
+    worst = {}
+    for kappa in KAPPAS:
+        for gamma in GAMMAS:
+            m = constant_material(kappa, gamma)
+            ref = m.eval(T, D)
+            rgb, _ = kernel_dr(m, log_cos_from_angle(T).astype(np.float32), D.astype(np.float32))
+            got = np.stack([np.array(c) for c in rgb], -1)
+            assert np.all(np.isfinite(got))
+            worst[(kappa, gamma)] = rel_err(got, ref).max()
+    print("\nlargest relative error of the float32 kernel (rows kappa, cols gamma):")
+    for kappa in KAPPAS:
+        print("  kappa %-6g " % kappa + " ".join("%9.2e" % worst[(kappa, g)] for g in GAMMAS))
+    # Error grows with the conditioning of exp at large kappa (one float32 ulp of
+    # log kappa becomes kappa ulps of the value): bounded, never blowing up.
+    assert max(worst.values()) < 2e-4
+    # tiny kappa: exp(x) - 1 would be off by ~5 % at kappa = 1e-6; the stable expm1 is not
+    assert max(worst[(k, g)] for k in KAPPAS[:3] for g in GAMMAS) < 5e-5
+
+
+def plugin_for(material, tmp_path):
+    path = tmp_path / "m.json"
+    material.save(path)
+    return mi.load_dict({"type": "dsbrdf", "filename": str(path)})
+
+
+def directions(th, td, seed=0):
+    """float32 direction pairs for angle grids (random phi_h, phi_d), and the
+    float64 angles of the rounded directions."""
+    rng = np.random.default_rng(seed)
+    T, D = (a.reshape(-1) for a in np.meshgrid(th, td, indexing="ij"))
+    wi, wo = from_half_diff(T, D, rng.uniform(0, np.pi, T.size), phi_h=0.7)
+    wi32, wo32 = (np.stack(v).astype(np.float32) for v in (wi, wo))
+    wi64, wo64 = (v.astype(np.float64) / np.linalg.norm(v.astype(np.float64), axis=0) for v in (wi32, wo32))
+    t_h, _, t_d, _ = half_diff(tuple(wi64), tuple(wo64))
+    return wi32, wo32, t_h, t_d, wo64[2]
+
+
+def bsdf_query(bsdf, wi32, wo32):
+    si = dr.zeros(mi.SurfaceInteraction3f, wi32.shape[1])
+    si.wi = mi.Vector3f(*wi32)
+    wo = mi.Vector3f(*wo32)
+    ctx = mi.BSDFContext()
+    return si, wo, ctx
+
+
+def test_plugin_eval_matches_reference_with_horizon(tmp_path):
+    for m in (varying_material(), constant_material(80.0, 1e4), constant_material(1e-6, 1.0)):
+        bsdf = plugin_for(m, tmp_path)
+        wi32, wo32, t_h, t_d, cos_o = directions(np.linspace(0, np.pi / 2, 40), np.linspace(0, np.pi / 2, 40))
+        si, wo, ctx = bsdf_query(bsdf, wi32, wo32)
+        got = np.array(bsdf.eval(ctx, si, wo)).T
+        above = (wi32[2] > 0) & (wo32[2] > 0)
+        assert np.all(got[~above] == 0), "directions below the horizon must give 0"
+        ref = m.eval(t_h, t_d) * cos_o[:, None]
+        err = rel_err(got[above], ref[above]).max()
+        print("plugin eval, max kappa %g: largest relative error %.2e" % (np.exp(m.log_kappa.max()), err))
+        assert err < 5e-4
+
+
+@pytest.mark.parametrize("kappa,gamma", [(1e-6, 1.0), (80.0, 1e4), (40.0, 1.0), (1e-3, 1e4)])
+def test_gradients_sample_and_pdf_finite_at_extremes(kappa, gamma, tmp_path):
+    m = constant_material(kappa, gamma)
+    T, D = (a.reshape(-1) for a in np.meshgrid(TH, TD, indexing="ij"))
+    rgb, params = kernel_dr(m, log_cos_from_angle(T).astype(np.float32), D.astype(np.float32), grad=True)
+    dr.backward(dr.sum(rgb[0] + rgb[1] + rgb[2]))
+    for p in params:
+        assert np.all(np.isfinite(np.array(dr.grad(p))))
+    bsdf = plugin_for(m, tmp_path)
+    n = 4096
+    rng = np.random.default_rng(1)
+    ct = np.concatenate([[1.0, 1e-4, 1e-7], rng.uniform(0, 1, n - 3)])
+    phi = rng.uniform(0, 2 * np.pi, n)
+    st = np.sqrt(1 - ct ** 2)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(st * np.cos(phi), st * np.sin(phi), ct)
+    bs, w = bsdf.sample(mi.BSDFContext(), si, mi.Float(rng.uniform(0, 1, n)),
+                        mi.Point2f(rng.uniform(0, 1, n), rng.uniform(0, 1, n)))
+    assert np.all(np.isfinite(np.array(w))) and np.all(np.isfinite(np.array(bs.pdf)))
+    pdf = bsdf.pdf(mi.BSDFContext(), si, bs.wo)
+    assert np.all(np.isfinite(np.array(pdf)))
+
+
+def test_material_file_round_trip_and_load_material(tmp_path):
+    m = varying_material()
+    p = tmp_path / "material.json"
+    m.save(p)
+    m2 = load_material(str(p))
+    th, td = np.random.default_rng(0).uniform(0, np.pi / 2, (2, 100))
+    np.testing.assert_array_equal(m.eval(th, td), m2.eval(th, td))
+    assert m2.eval(th, td).shape == (100, 3) and m2.eval(th, td).dtype == np.float64
+
+
+@pytest.mark.parametrize("mutate,message", [
+    (lambda d: d.update(log_kappa=[[0.0] * 5]), "log_kappa must have 6 values"),
+    (lambda d: d.update(chromaticity=[[0.5, 0.5, 0.5], [0.2, 0.3, 0.5]]), "must sum to 1"),
+    (lambda d: d.update(chromaticity=[[1.2, -0.2, 0.0], [0.2, 0.3, 0.5]]), "non-negative"),
+    (lambda d: d.update(log_kappa=[[5.0] * 6, [0.0] * 6]), "kappa must be <= 85"),
+    (lambda d: d.update(log_gamma=[[0.0] * 6]), "one row per lobe"),
+    (lambda d: d.pop("log_gamma"), "lacks log_gamma"),
+    (lambda d: d.update(format="something-else"), "not a mi-dsbrdf material"),
+    (lambda d: d.update(knots=[0, 1, 2]), "knot vector"),
+])
+def test_malformed_material_file(mutate, message, tmp_path):
+    d = varying_material().to_dict()
+    mutate(d)
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(d))
+    with pytest.raises(MaterialError, match=message):
+        load_material(str(p))
+
+
+def test_unreadable_and_unknown_materials(tmp_path):
+    p = tmp_path / "broken.json"
+    p.write_text("{ not json")
+    with pytest.raises(MaterialError, match="unreadable"):
+        load_material(str(p))
+    with pytest.raises(MaterialError, match="does not exist"):
+        load_material(str(tmp_path / "missing.json"))
+    with pytest.raises(MaterialError, match="unknown material 'no-such-material'"):
+        load_material("no-such-material")
+
+
+@pytest.mark.parametrize("props,message", [
+    ({"kappa_0": "-1", "gamma_0": "2"}, "kappa control values must be > 0"),
+    ({"kappa_0": "1", "gamma_0": "-3"}, "gamma control values must be > 0"),
+    ({"kappa_0": "1 2 3", "gamma_0": "2"}, "kappa_0 needs 6 values"),
+    ({"kappa_0": "1", "gamma_0": "2", "chromaticity_0": "0.5 0.5 0.5"}, "must sum to 1"),
+    ({"lobes": 2, "kappa_0": "1", "gamma_0": "2"}, "missing parameter kappa_1"),
+    ({"kappa_0": "1", "gamma_0": "2", "kappa_3": "1", "gamma_3": "1"}, "1 to 3 lobes"),
+    ({"material": "no-such-material"}, "unknown material"),
+    ({"filename": "x.json", "kappa_0": "1"}, "give one of"),
+])
+def test_bad_xml_parameters(props, message):
+    with pytest.raises(RuntimeError, match=message):
+        mi.load_dict(dict(type="dsbrdf", **props))
+
+
+def test_explicit_xml_equals_file(tmp_path):
+    m = varying_material()
+    p = tmp_path / "m.json"
+    m.save(p)
+    explicit = {"type": "dsbrdf", "lobes": 2}
+    for r in range(2):
+        explicit["kappa_%d" % r] = " ".join("%.17g" % v for v in np.exp(m.log_kappa[r]))
+        explicit["gamma_%d" % r] = " ".join("%.17g" % v for v in np.exp(m.log_gamma[r]))
+        explicit["chromaticity_%d" % r] = " ".join("%.17g" % v for v in m.chromaticity[r])
+    a = mi.load_dict(explicit)
+    b = mi.load_dict({"type": "dsbrdf", "filename": str(p)})
+    wi32, wo32, *_ = directions(np.linspace(0, 1.2, 10), np.linspace(0, 1.2, 10))
+    si, wo, ctx = bsdf_query(a, wi32, wo32)
+    np.testing.assert_allclose(np.array(a.eval(ctx, si, wo)), np.array(b.eval(ctx, si, wo)), rtol=1e-6)
