@@ -23,10 +23,11 @@ def _setup(variant):
 def cmd_render(args):
     from .render import render_to_files
     from .scenes import scene_path
+    scene = scene_path(args.scene)
     _prepare_out(args.out, args.force)
     stem = os.path.join(args.out, os.path.splitext(os.path.basename(args.scene))[0])
     params = dict(p.split("=", 1) for p in args.param)
-    r = render_to_files(scene_path(args.scene), stem, spp=args.spp, **params)
+    r = render_to_files(scene, stem, spp=args.spp, **params)
     print("rendered %s in %.2f s -> %s, %s" % (args.scene, r["seconds"], r["exr"], r["png"]))
 
 

@@ -52,8 +52,9 @@ def load_material(path_or_name) -> Material:
     return model.library_material(s)
 
 
-def _floats(value, what, n=None) -> np.ndarray:
-    """Parse a float, or a string of floats separated by spaces/commas."""
+def _floats(value, what, n=None, broadcast=True) -> np.ndarray:
+    """Parse a float, or a string of floats separated by spaces/commas; with
+    ``broadcast`` a single value stands for n equal ones (a constant curve)."""
     if isinstance(value, (int, float)):
         vals = np.array([float(value)])
     else:
@@ -61,7 +62,7 @@ def _floats(value, what, n=None) -> np.ndarray:
             vals = np.array([float(v) for v in str(value).replace(",", " ").split()])
         except ValueError:
             raise MaterialError("%s must be numbers, got %r" % (what, value)) from None
-    if n is not None and vals.size == 1 and n > 1:
+    if broadcast and n is not None and vals.size == 1 and n > 1:
         vals = np.full(n, vals[0])
     if n is not None and vals.size != n:
         raise MaterialError("%s needs %d values, got %d" % (what, n, vals.size))
@@ -98,7 +99,7 @@ def material_from_params(params: dict):
         if model is None:
             raise MaterialError("psi was given but no reflectance model is installed; pass model=<file>")
         basis = model.basis
-        psi = _floats(p["psi"], "psi", basis.n_bases)
+        psi = _floats(p["psi"], "psi", basis.n_bases, broadcast=False)
         chroma = _chromaticities(p, basis.n_lobes)
         return Material.from_basis(basis, psi, chroma), basis
     if not explicit:
@@ -118,7 +119,7 @@ def material_from_params(params: dict):
 
 def _chromaticities(p, lobes) -> np.ndarray:
     return np.stack([_floats(p.get("chromaticity_%d" % r, "0.333333333 0.333333333 0.333333334"),
-                             "chromaticity_%d" % r, 3) for r in range(lobes)])
+                             "chromaticity_%d" % r, 3, broadcast=False) for r in range(lobes)])
 
 
 def _need(p, key):

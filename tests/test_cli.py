@@ -1,0 +1,31 @@
+"""The command line: the demo (the README's main job) and output-directory safety."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from mi_dsbrdf.cli import main
+from mi_dsbrdf.scenes import SCENES
+
+
+def test_demo_writes_exr_and_png_and_never_overwrites(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--spp", "4"]) == 0
+    for name in SCENES:
+        assert (out / (name + ".exr")).stat().st_size > 0
+        assert (out / (name + ".png")).stat().st_size > 0
+    import mitsuba as mi
+    img = np.array(mi.Bitmap(str(out / "sphere_envmap.exr")))
+    assert img.shape == (128, 128, 3) and np.isfinite(img).all() and img.max() > 0
+    before = (out / "sphere_envmap.exr").stat().st_mtime_ns
+    r = subprocess.run([sys.executable, "-m", "mi_dsbrdf.cli", "demo", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and "--force" in r.stderr
+    assert (out / "sphere_envmap.exr").stat().st_mtime_ns == before
+
+
+def test_render_missing_scene_is_a_clear_error(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "nope.xml"), "--out", str(tmp_path / "o")]) == 1
+    assert "no scene" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
