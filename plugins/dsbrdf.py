@@ -28,6 +28,8 @@ from mi_dsbrdf.dsbrdf import lobe_curves, lobe_rgb
 from mi_dsbrdf.library import material_from_params
 from mi_dsbrdf.sampling import dsbrdf_weights, mixture_pdf, mixture_sample
 
+from .common import both_above, glossy_sample
+
 FLAGS = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 
 
@@ -86,17 +88,14 @@ class DSBRDF(mi.BSDF):
         kappa, gamma = lobe_curves(dr.safe_acos(wi.z), log_kappa, log_gamma, self.knots)
         return dsbrdf_weights(kappa, gamma)
 
-    def _active(self, si, wo, active):
-        return active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-
     def eval(self, ctx, si, wo, active=True):
-        active = self._active(si, wo, active)
+        active = both_above(si, wo, active)
         return dr.select(active, self._rho_cos(si.wi, wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
         wc, w, n = self._mixture(si.wi)
         pdf = mixture_pdf((si.wi.x, si.wi.y, si.wi.z), (wo.x, wo.y, wo.z), wc, w, n)
-        return dr.select(self._active(si, wo, active), pdf, 0.0)
+        return dr.select(both_above(si, wo, active), pdf, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
@@ -109,12 +108,7 @@ class DSBRDF(mi.BSDF):
         wo = mi.Vector3f(*wo_t)
         pdf = mixture_pdf(wi_t, wo_t, wc, w, n)
         active = active & valid & (pdf > 0) & (mi.Frame3f.cos_theta(wi) > 0)
-        bs = dr.zeros(mi.BSDFSample3f)
-        bs.wo = wo
-        bs.pdf = dr.select(active, pdf, 0.0)
-        bs.eta = 1.0
-        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-        bs.sampled_component = mi.UInt32(0)
+        bs = glossy_sample(wo, pdf, active)
         weight = self._rho_cos(wi, wo) / dr.select(active, pdf, 1.0)
         return bs, dr.select(active, weight, 0.0)
 

@@ -21,6 +21,8 @@ from mi_dsbrdf.errors import MeasuredFileError
 from mi_dsbrdf.measured import MeasuredBRDF, lookup_indices
 from mi_dsbrdf.sampling import mixture_pdf, mixture_sample
 
+from .common import both_above, glossy_sample
+
 FLAGS = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 
 
@@ -57,15 +59,12 @@ class MeasuredBSDF(mi.BSDF):
             value += dr.gather(mi.Color3f, self.table, mi.UInt32(idx)) * w
         return value * wo.z
 
-    def _active(self, si, wo, active):
-        return active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-
     def eval(self, ctx, si, wo, active=True):
-        return dr.select(self._active(si, wo, active), self._rho_cos(si.wi, wo), 0.0)
+        return dr.select(both_above(si, wo, active), self._rho_cos(si.wi, wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
         pdf = mixture_pdf((si.wi.x, si.wi.y, si.wi.z), (wo.x, wo.y, wo.z), self.w_cos, self.weights, self.exponents)
-        return dr.select(self._active(si, wo, active), pdf, 0.0)
+        return dr.select(both_above(si, wo, active), pdf, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
@@ -77,12 +76,7 @@ class MeasuredBSDF(mi.BSDF):
         wo = mi.Vector3f(*wo_t)
         pdf = mixture_pdf(wi_t, wo_t, self.w_cos, self.weights, self.exponents)
         active = active & valid & (pdf > 0) & (mi.Frame3f.cos_theta(wi) > 0)
-        bs = dr.zeros(mi.BSDFSample3f)
-        bs.wo = wo
-        bs.pdf = dr.select(active, pdf, 0.0)
-        bs.eta = 1.0
-        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-        bs.sampled_component = mi.UInt32(0)
+        bs = glossy_sample(wo, pdf, active)
         return bs, dr.select(active, self._rho_cos(wi, wo) / dr.select(active, pdf, 1.0), 0.0)
 
     def to_string(self):
