@@ -38,18 +38,17 @@ def cos_half_diff(wi, wo):
     return hz, cos_d, hx * hx + hy * hy
 
 
-def log_cos_theta_h(wi, wo):
+def log_cos_h(cos_h, sin2_h):
     """log cos theta_h, accurate at the specular peak and finite at 90 deg.
 
     1/2 log1p(-sin^2 theta_h) while sin^2 theta_h < 1/2 (full relative precision
-    as theta_h -> 0), log max(cos theta_h, 1e-30) beyond.
+    as theta_h -> 0), log max(cos theta_h, 1e-30) beyond. Takes the values
+    :func:`cos_half_diff` returns, or cos and sin^2 of an angle (numpy reference).
     """
-    o = ops(*wi, *wo)
-    _, _, hz = half_vector(wi, wo)
-    _, _, sin2_h = cos_half_diff(wi, wo)
+    o = ops(cos_h, sin2_h)
     near = sin2_h < 0.5
     return o.select(near, 0.5 * log1p(-o.select(near, sin2_h, 0.0)),
-                    o.log(o.fmax(o.select(near, 1.0, hz), 1e-30)))
+                    o.log(o.fmax(o.select(near, 1.0, cos_h), 1e-30)))
 
 
 def half_diff(wi, wo):

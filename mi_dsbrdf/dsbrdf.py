@@ -22,6 +22,7 @@ import os
 
 import numpy as np
 
+from .angles import log_cos_h
 from .curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
 from .errors import MaterialError
 from .xp import expm1, ops
@@ -62,13 +63,6 @@ def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAU
         lobe = expm1(k * o.exp(g * log_cos_h))
         rgb = [acc + c_l * lobe for acc, c_l in zip(rgb, c)]
     return rgb
-
-
-def log_cos_from_angle(theta_h) -> np.ndarray:
-    """float64 log cos theta_h, precise near 0 (log1p form), >= log 1e-30."""
-    th = np.asarray(theta_h, dtype=np.float64)
-    near = np.log1p(-np.sin(np.minimum(th, math.pi / 4)) ** 2) / 2
-    return np.where(th < math.pi / 4, near, np.log(np.maximum(np.cos(th), COS_H_MIN)))
 
 
 class Material:
@@ -147,8 +141,8 @@ class Material:
         td = np.asarray(theta_d, dtype=np.float64).reshape(-1)
         if th.shape != td.shape:
             raise ValueError("theta_h and theta_d must have the same length, got %d and %d" % (th.size, td.size))
-        log_cos_h = log_cos_from_angle(th)
-        return np.stack(lobe_rgb(log_cos_h, td, self.log_kappa, self.log_gamma, self.chromaticity, self.knots), -1)
+        log_cos = log_cos_h(np.cos(th), np.sin(th) ** 2)
+        return np.stack(lobe_rgb(log_cos, td, self.log_kappa, self.log_gamma, self.chromaticity, self.knots), -1)
 
     # --- files ---------------------------------------------------------------
     def to_dict(self) -> dict:

@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 
-from .curves import CurveBasis, N_CONTROL
+from .curves import N_CONTROL
 from .dsbrdf import MAX_LOBES, Material
 from .errors import MaterialError
 

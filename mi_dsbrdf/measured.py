@@ -53,7 +53,7 @@ def lookup_indices(theta_h, theta_d, phi_d, linear=True):
     up = fold_phi_d(phi_d) / math.pi * N_PHI_D
     axes = []
     for u, n, wrap in ((uh, N_THETA_H, False), (ud, N_THETA_D, False), (up, N_PHI_D, True)):
-        i0 = o.clip(_floor(o, u), 0.0, n - 1.0)
+        i0 = o.clip(o.floor(u), 0.0, n - 1.0)
         if not linear:
             axes.append([(i0, 1.0)])
             continue
@@ -66,12 +66,6 @@ def lookup_indices(theta_h, theta_d, phi_d, linear=True):
             for kp, wp in axes[2]:
                 out.append(((ih * N_THETA_D + jd) * N_PHI_D + kp, wh * wd * wp))
     return out
-
-
-def _floor(o, x):
-    if o.name == "numpy":
-        return np.floor(x)
-    return o.dr.floor(x)
 
 
 class MeasuredBRDF:
@@ -135,10 +129,7 @@ class MeasuredBRDF:
     def from_nbrdf(cls, npz_path, name):
         """Tabulate the neural fit of MERL material ``name`` on the MERL grid."""
         weights = load_nbrdf_weights(npz_path, name)
-        th, td, pd = grid_angles()
-        TH, TD, PD = np.meshgrid(th, td, pd, indexing="ij")
-        table = eval_nbrdf(weights, TH.reshape(-1), TD.reshape(-1), PD.reshape(-1))
-        return cls(table.reshape(SHAPE + (3,)), name=name)
+        return cls.from_function(lambda th, td, pd: eval_nbrdf(weights, th, td, pd), name=name)
 
     @classmethod
     def from_function(cls, brdf, name=None):
@@ -153,7 +144,7 @@ class MeasuredBRDF:
         flat = self.table.reshape(-1, 3).astype(np.float64)
         th, td, pd = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (theta_h, theta_d, phi_d))
         out = np.zeros(th.shape + (3,))
-        for idx, w in lookup_indices(th, td, pd, linear=_linear(interpolation)):
+        for idx, w in lookup_indices(th, td, pd, linear=is_linear(interpolation)):
             out += flat[idx.astype(np.int64)] * np.reshape(w, (-1, 1))
         return out
 
@@ -187,9 +178,10 @@ class MeasuredBRDF:
         return self.table.sum(axis=2) / np.maximum(n, 1)
 
 
-def _linear(interpolation) -> bool:
+def is_linear(interpolation) -> bool:
+    """True for 'linear', False for 'nearest'; MeasuredFileError otherwise."""
     if interpolation not in ("linear", "nearest"):
-        raise ValueError("interpolation must be 'linear' or 'nearest', got %r" % (interpolation,))
+        raise MeasuredFileError("interpolation must be 'linear' or 'nearest', got %r" % (interpolation,))
     return interpolation == "linear"
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 
-from .angles import cos_half_diff, log_cos_theta_h
+from .angles import cos_half_diff, log_cos_h
 from .xp import expm1, ops
 
 W_COS = 0.15            # defensive share of cosine-hemisphere sampling
@@ -60,11 +60,11 @@ def mixture_pdf(wi, wo, w_cos, weights, exponents):
     cos_o = wo[2]
     above = (cos_o > 0.0) & (wi[2] > 0.0)
     pdf = w_cos * o.fmax(cos_o, 0.0) * (1.0 / math.pi)
-    _, cos_d, _ = cos_half_diff(wi, wo)
-    log_cos_h = log_cos_theta_h(wi, wo)
+    cos_h, cos_d, sin2_h = cos_half_diff(wi, wo)
+    log_cos = log_cos_h(cos_h, sin2_h)
     jac = 1.0 / (4.0 * o.fmax(cos_d, 1e-12))
     for w, n in zip(weights, exponents):
-        pdf = pdf + w * (n + 1.0) * (0.5 / math.pi) * o.exp(n * log_cos_h) * jac
+        pdf = pdf + w * (n + 1.0) * (0.5 / math.pi) * o.exp(n * log_cos) * jac
     return o.select(above & (cos_d > 0.0), pdf, 0.0)
 
 

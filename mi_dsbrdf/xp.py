@@ -20,6 +20,7 @@ class _Numpy:
     exp = staticmethod(np.exp)
     log = staticmethod(np.log)
     abs = staticmethod(np.abs)
+    floor = staticmethod(np.floor)
     select = staticmethod(np.where)
     fmax = staticmethod(np.fmax)
     fmin = staticmethod(np.fmin)
@@ -37,6 +38,7 @@ class _DrJit:
         self.acos = dr.safe_acos
         self.atan2 = dr.atan2
         self.sin, self.cos, self.exp, self.log, self.abs = dr.sin, dr.cos, dr.exp, dr.log, dr.abs
+        self.floor = dr.floor
         self.select = dr.select
         # fmax/fmin: NaN-suppressing like numpy's (dr.maximum propagates NaN).
         self.fmax, self.fmin = dr.fmax, dr.fmin

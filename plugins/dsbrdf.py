@@ -22,13 +22,13 @@ that sampled directions do not depend on them.
 import drjit as dr
 import mitsuba as mi
 
-from mi_dsbrdf.angles import cos_half_diff, log_cos_theta_h
+from mi_dsbrdf.angles import cos_half_diff, log_cos_h
 from mi_dsbrdf.curves import N_CONTROL
 from mi_dsbrdf.dsbrdf import lobe_curves, lobe_rgb
 from mi_dsbrdf.library import material_from_params
-from mi_dsbrdf.sampling import dsbrdf_weights, mixture_pdf, mixture_sample
+from mi_dsbrdf.sampling import dsbrdf_weights
 
-from .common import both_above, glossy_sample
+from .common import both_above, pdf_of_mixture, sample_mixture
 
 FLAGS = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 
@@ -77,9 +77,9 @@ class DSBRDF(mi.BSDF):
     def _rho_cos(self, wi, wo):
         """Eq. 4 times cos theta_o, as a Color3f."""
         wi_t, wo_t = (wi.x, wi.y, wi.z), (wo.x, wo.y, wo.z)
-        _, cos_d, _ = cos_half_diff(wi_t, wo_t)
+        cos_h, cos_d, sin2_h = cos_half_diff(wi_t, wo_t)
         log_kappa, log_gamma, chroma = self._lobe_params()
-        rgb = lobe_rgb(log_cos_theta_h(wi_t, wo_t), dr.safe_acos(cos_d), log_kappa, log_gamma, chroma, self.knots)
+        rgb = lobe_rgb(log_cos_h(cos_h, sin2_h), dr.safe_acos(cos_d), log_kappa, log_gamma, chroma, self.knots)
         return mi.Color3f(*rgb) * wo.z
 
     def _mixture(self, wi):
@@ -93,24 +93,13 @@ class DSBRDF(mi.BSDF):
         return dr.select(active, self._rho_cos(si.wi, wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        wc, w, n = self._mixture(si.wi)
-        pdf = mixture_pdf((si.wi.x, si.wi.y, si.wi.z), (wo.x, wo.y, wo.z), wc, w, n)
-        return dr.select(both_above(si, wo, active), pdf, 0.0)
+        return pdf_of_mixture(si, wo, active, self._mixture(si.wi))
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
-        wi = si.wi
-        wc, w, n = self._mixture(wi)
-        wi_t = (wi.x, wi.y, wi.z)
-        wo_t, valid = mixture_sample(wi_t, sample1, sample2.x, sample2.y, wc, w, n)
-        wo = mi.Vector3f(*wo_t)
-        pdf = mixture_pdf(wi_t, wo_t, wc, w, n)
-        active = active & valid & (pdf > 0) & (mi.Frame3f.cos_theta(wi) > 0)
-        bs = glossy_sample(wo, pdf, active)
-        weight = self._rho_cos(wi, wo) / dr.select(active, pdf, 1.0)
-        return bs, dr.select(active, weight, 0.0)
+        return sample_mixture(si, sample1, sample2, active, self._mixture(si.wi), self._rho_cos)
 
     def to_string(self):
         return "DSBRDF[lobes=%d, material=%s, basis=%s]" % (

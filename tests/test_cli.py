@@ -1,5 +1,4 @@
 """The command line: the demo (the README's main job) and output-directory safety."""
-import os
 import subprocess
 import sys
 
