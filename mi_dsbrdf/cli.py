@@ -5,6 +5,8 @@ import argparse
 import os
 import sys
 
+from .errors import MiDsbrdfError
+
 
 def _prepare_out(path, force):
     if os.path.exists(path) and os.listdir(path) and not force:
@@ -40,6 +42,22 @@ def cmd_demo(args):
         print("rendered %-20s in %6.2f s -> %s" % (name, r["seconds"], r["png"]))
 
 
+def cmd_build_model(args):
+    from .build_model import build_model
+    from .model_data import SHIPPED
+    out = args.out or SHIPPED
+    if os.path.exists(out) and not args.force:
+        raise SystemExit("mi-dsbrdf: %s exists; pass --force to replace it" % out)
+    a = build_model(args.merl, out, k=args.k, exclude=args.exclude, workers=args.workers,
+                    fits_from=args.fits_from)
+    import json
+    info = json.loads(str(a["build_info"]))
+    print("model with %d bases (%.1f%% of the curve variance), %d library materials, GMM of %d %s components, "
+          "hue kappa_h %.3g: %s (%.0f s)" % (
+              args.k, 100 * a["fpca_variance"][:args.k].sum() / a["fpca_variance"].sum(), len(a["library_names"]),
+              len(a["gmm_weights"]), str(a["gmm_covariance_type"]), float(a["hue_kappa"]), out, info["seconds"]))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="mi-dsbrdf", description=__doc__)
     ap.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_rgb)")
@@ -60,11 +78,23 @@ def main(argv=None):
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=cmd_demo)
 
+    p = sub.add_parser("build-model", help="fit MERL, learn bases and priors, write the reflectance model")
+    p.add_argument("--merl", required=True, help="merl_nbrdf_weights.npz or a folder of MERL .binary files")
+    p.add_argument("--out", default=None, help="model file (default: the package's mi_dsbrdf/data/model.npz)")
+    p.add_argument("--k", type=int, default=10, help="number of basis functions (default 10)")
+    p.add_argument("--exclude", action="append", default=[], metavar="NAME",
+                   help="leave this material out of bases, library and priors (repeatable)")
+    p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--fits-from", default=None, metavar="MODEL",
+                   help="reuse the full per-material fits stored in this model file")
+    p.add_argument("--force", action="store_true", help="replace an existing model file")
+    p.set_defaults(func=cmd_build_model)
+
     args = ap.parse_args(argv)
     try:
         _setup(args.variant)
         args.func(args)
-    except (FileNotFoundError, ValueError, RuntimeError, ImportError) as e:
+    except (MiDsbrdfError, FileNotFoundError, ValueError, RuntimeError, ImportError) as e:
         print("mi-dsbrdf: %s" % e, file=sys.stderr)
         return 1
     return 0

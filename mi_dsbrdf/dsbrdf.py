@@ -50,6 +50,15 @@ def lobe_curves(theta_d, log_kappa, log_gamma, knots=DEFAULT_KNOTS):
     return kappa, gamma
 
 
+def clamp_controls(log_kappa, log_gamma):
+    """Control values clamped into the valid range (log kappa <= log 85, gamma in
+    [1e-4, 1e6]): how a point of a learned basis, which is unbounded, becomes a
+    material. numpy arrays or Dr.Jit arrays; the fit applies the same clamp, so a
+    fitted psi is the material it was fitted as."""
+    o = ops(log_kappa, log_gamma)
+    return o.fmin(log_kappa, LOG_KAPPA_MAX), o.clip(log_gamma, LOG_GAMMA_MIN, LOG_GAMMA_MAX)
+
+
 def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS):
     """Eq. 4: the RGB DSBRDF value as three arrays (1/sr).
 
@@ -120,9 +129,11 @@ class Material:
 
     @classmethod
     def from_basis(cls, basis, psi, chromaticity, **kw):
-        """From coefficients ``psi`` of a learned :class:`~mi_dsbrdf.curves.CurveBasis`."""
+        """From coefficients ``psi`` of a learned :class:`~mi_dsbrdf.curves.CurveBasis`
+        (control values clamped by :func:`clamp_controls`)."""
         ctrl = basis.control_values(psi)
-        return cls(ctrl[:, 0], ctrl[:, 1], chromaticity, knots=basis.knots, psi=psi, **kw)
+        log_kappa, log_gamma = clamp_controls(ctrl[:, 0], ctrl[:, 1])
+        return cls(log_kappa, log_gamma, chromaticity, knots=basis.knots, psi=psi, **kw)
 
     @property
     def n_lobes(self) -> int:

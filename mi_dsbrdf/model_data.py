@@ -10,11 +10,20 @@ One ``.npz`` file (shipped as ``mi_dsbrdf/data/model.npz`` once built by
     library_psi      (M, k)        their basis coefficients
     library_chroma   (M, R, 3)     their lobe chromaticities
 
-and the priors' arrays (read by :mod:`mi_dsbrdf.priors`).
+and the priors
+
+    gmm_weights (C,), gmm_means (C, k), gmm_covariances (C, k, k)   Eq. 6
+    hue_kappa   ()                                                  Eq. 7-12
+
+plus what the build keeps for leave-one-out rebuilds and reports (written by
+:mod:`mi_dsbrdf.build_model`): ``fpca_bases``, ``fpca_variance``, the full fits
+``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_error``, ``fit_flags``,
+``library_error``, ``excluded`` and ``build_info`` (JSON).
 """
 from __future__ import annotations
 
 import functools
+import json
 import os
 
 import numpy as np
@@ -22,6 +31,7 @@ import numpy as np
 from .curves import CurveBasis
 from .dsbrdf import Material
 from .errors import MaterialError, ModelError
+from .priors import GaussianMixture, HuePrior
 
 SHIPPED = os.path.join(os.path.dirname(__file__), "data", "model.npz")
 REQUIRED = ("knots", "mean", "bases", "library_names", "library_psi", "library_chroma")
@@ -45,9 +55,35 @@ class ReflectanceModel:
         if psi.shape != (m, k) or chroma.shape != (m, r, 3):
             raise ModelError("%s: library_psi must be (%d, %d) and library_chroma (%d, %d, 3), got %s and %s"
                              % (source, m, k, m, r, psi.shape, chroma.shape))
+        if not (np.all(np.isfinite(psi)) and np.all(np.isfinite(chroma))):
+            raise ModelError("%s: library_psi and library_chroma must be finite" % source)
         self.library = {n: (psi[i], chroma[i]) for i, n in enumerate(names)}
         self.arrays = arrays
         self.source = source
+        self.gmm = None
+        if "gmm_weights" in arrays:
+            try:
+                self.gmm = GaussianMixture(arrays["gmm_weights"], arrays["gmm_means"], arrays["gmm_covariances"])
+            except (KeyError, ValueError) as e:
+                raise ModelError("%s: bad Gaussian mixture prior: %s" % (source, e)) from None
+            if self.gmm.dim != k:
+                raise ModelError("%s: the Gaussian mixture is over %d coefficients but the basis has %d"
+                                 % (source, self.gmm.dim, k))
+        self.hue_prior = None
+        if "hue_kappa" in arrays:
+            try:
+                self.hue_prior = HuePrior(float(arrays["hue_kappa"]))
+            except (TypeError, ValueError) as e:
+                raise ModelError("%s: bad hue prior: %s" % (source, e)) from None
+        try:
+            self.info = json.loads(str(arrays["build_info"])) if "build_info" in arrays else {}
+        except ValueError:
+            raise ModelError("%s: build_info is not JSON" % source) from None
+
+    @property
+    def excluded(self) -> list:
+        """Materials the model was built without (leave-one-out)."""
+        return [str(n) for n in self.arrays.get("excluded", [])]
 
     def mean_material(self) -> Material:
         """All coefficients zero; grey chromaticity."""

@@ -24,7 +24,7 @@ import mitsuba as mi
 
 from mi_dsbrdf.angles import cos_half_diff, log_cos_h
 from mi_dsbrdf.curves import N_CONTROL
-from mi_dsbrdf.dsbrdf import lobe_curves, lobe_rgb
+from mi_dsbrdf.dsbrdf import clamp_controls, lobe_curves, lobe_rgb
 from mi_dsbrdf.library import material_from_params
 from mi_dsbrdf.sampling import dsbrdf_weights
 
@@ -64,8 +64,9 @@ class DSBRDF(mi.BSDF):
             # Eq. 2-3: control values = mean + sum_i psi_i b_i (keeps the AD graph to psi)
             ctrl = self.basis.control_values_dr(self.psi)
             idx_k = [r * 2 * N_CONTROL + j for r in range(self.n_lobes) for j in range(N_CONTROL)]
-            self.log_kappa = dr.gather(mi.Float, ctrl, mi.UInt32(idx_k))
-            self.log_gamma = dr.gather(mi.Float, ctrl, mi.UInt32([i + N_CONTROL for i in idx_k]))
+            self.log_kappa, self.log_gamma = clamp_controls(
+                dr.gather(mi.Float, ctrl, mi.UInt32(idx_k)),
+                dr.gather(mi.Float, ctrl, mi.UInt32([i + N_CONTROL for i in idx_k])))
 
     def _lobe_params(self, detach=False):
         def scalars(arr, width):

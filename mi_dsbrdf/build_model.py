@@ -1,0 +1,199 @@
+"""Build the data-driven reflectance model from MERL (paper §3): the command
+behind ``mi-dsbrdf build-model``.
+
+    measured BRDFs ──fit_full──▶ 3-lobe B-spline DSBRDF per material (Eq. 5)
+                   ──fpca─────▶ mean b_mu + bases b_i of the log curves (Eq. 2-3)
+                   ──fit_basis─▶ psi (k) + chromaticity per material (library)
+                   ──priors───▶ GMM on psi (Eq. 6, BIC), hue kappa_h (Eq. 7-12)
+                   ──▶ model.npz
+
+The full fits of a material do not depend on the other materials, so they are
+kept in the model file (``fit_*`` arrays) and a leave-one-out model
+(:func:`build_from_fits` with ``exclude``) rebuilds the bases, the library and
+the priors without the excluded materials from them, in seconds.
+
+Deterministic: the fits are deterministic and the GMM's EM is seeded.
+"""
+from __future__ import annotations
+
+import glob
+import json
+import os
+import platform
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from .errors import MeasuredFileError, ModelError
+
+DEFAULT_K = 10
+SEED = 0
+
+
+# --- sources -----------------------------------------------------------------------
+
+def source_names(source) -> list:
+    """Material names of a source: a ``merl_nbrdf_weights.npz`` or a folder of ``.binary`` files."""
+    source = os.fspath(source)
+    if os.path.isdir(source):
+        files = sorted(glob.glob(os.path.join(source, "*.binary")))
+        if not files:
+            raise MeasuredFileError("no MERL .binary files in %s" % source)
+        return [os.path.splitext(os.path.basename(f))[0] for f in files]
+    if not os.path.exists(source):
+        raise MeasuredFileError("MERL source %s does not exist (give a merl_nbrdf_weights.npz or a folder "
+                                "of .binary files)" % source)
+    from .measured import nbrdf_names
+    return nbrdf_names(source)
+
+
+def load_samples(source, name, subset=None):
+    """:class:`~mi_dsbrdf.fitting.Samples` of one material of a source."""
+    from . import fitting, measured
+    source = os.fspath(source)
+    if os.path.isdir(source):
+        return fitting.samples_from_table(measured.MeasuredBRDF.from_binary(os.path.join(source, name + ".binary")),
+                                          subset)
+    w = measured.load_nbrdf_weights(source, name)
+    return fitting.samples_from_function(lambda th, td, pd: measured.eval_nbrdf(w, th, td, pd), subset, name)
+
+
+def source_kind(source) -> str:
+    return "MERL .binary files" if os.path.isdir(os.fspath(source)) else "MERL neural fits (NBRDF, Sztrajman et al. 2021)"
+
+
+# --- per-material work (runs in worker processes) ------------------------------------
+
+def _fit_full_job(args):
+    source, name = args
+    from .fitting import fit_full
+    t0 = time.perf_counter()
+    f = fit_full(load_samples(source, name))
+    return name, f.variables, f.material.chromaticity, f.error, f.at_bounds, time.perf_counter() - t0
+
+
+def _fit_basis_job(args):
+    source, name, mean, bases, knots, psi0, chroma0 = args
+    from .curves import CurveBasis
+    from .fitting import fit_basis
+    f = fit_basis(load_samples(source, name), CurveBasis(mean, bases, knots), psi0, chroma0)
+    return name, f.variables, f.material.chromaticity, f.error
+
+
+def _map(fn, jobs, workers, desc, progress):
+    """Run ``fn`` over ``jobs`` in ``workers`` processes, in job order, with a progress bar."""
+    from tqdm import tqdm
+    bar = tqdm(total=len(jobs), desc=desc, disable=not progress, unit="mat", file=sys.stderr)
+    out = []
+    if workers <= 1:
+        for j in jobs:
+            out.append(fn(j))
+            bar.update()
+    else:
+        import multiprocessing
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as ex:
+            for r in ex.map(fn, jobs):
+                out.append(r)
+                bar.update()
+    bar.close()
+    return out
+
+
+# --- the build -----------------------------------------------------------------------
+
+def fit_all(source, names=None, workers=2, progress=True) -> dict:
+    """Full 3-lobe B-spline fits of every material of ``source``.
+
+    Returns ``{"names", "controls" (M, 3, 2, 6), "chroma" (M, 3, 3), "error" (M,),
+    "flags" [list of str per material], "seconds" (M,)}``.
+    """
+    names = source_names(source) if names is None else list(names)
+    rows = _map(_fit_full_job, [(os.fspath(source), n) for n in names], workers, "full DSBRDF fits", progress)
+    return {"names": [r[0] for r in rows], "controls": np.array([r[1] for r in rows]),
+            "chroma": np.array([r[2] for r in rows]), "error": np.array([r[3] for r in rows]),
+            "flags": [list(r[4]) for r in rows], "seconds": np.array([r[5] for r in rows])}
+
+
+def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2, progress=True,
+                    refit=True) -> dict:
+    """Bases, library and priors from full fits, without the ``exclude``d materials.
+
+    With ``refit`` (and a ``source``), every kept material is refitted in the
+    basis model (psi + chromaticity, Eq. 5); otherwise its psi is its FPCA score
+    and its chromaticity that of the full fit (fast, for leave-one-out studies).
+    Returns the arrays of a model file.
+    """
+    from .fpca import fpca
+    from .priors import fit_hue_concentration, select_gmm
+    names = list(fits["names"])
+    exclude = list(exclude)
+    unknown = [n for n in exclude if n not in names]
+    if unknown:
+        raise ModelError("cannot exclude %s: not among the fitted materials" % ", ".join(unknown))
+    keep = [i for i, n in enumerate(names) if n not in exclude]
+    if len(keep) < k + 2:
+        raise ModelError("%d materials are too few for %d bases" % (len(keep), k))
+    kept = [names[i] for i in keep]
+    pca = fpca(fits["controls"][keep])
+    basis = pca.basis(k)
+    if refit:
+        if source is None:
+            raise ModelError("refitting in the basis needs the measurement source")
+        jobs = [(os.fspath(source), n, basis.mean, basis.bases, basis.knots, pca.scores[j, :k], fits["chroma"][i])
+                for j, (i, n) in enumerate(zip(keep, kept))]
+        rows = _map(_fit_basis_job, jobs, workers, "basis refits (k=%d)" % k, progress)
+        psi = np.array([r[1] for r in rows])
+        chroma = np.array([r[2] for r in rows])
+        err = np.array([r[3] for r in rows])
+    else:
+        psi, chroma, err = pca.scores[:, :k], fits["chroma"][keep], np.full(len(keep), np.nan)
+    sel = select_gmm(psi, seed=SEED)
+    kappa_h, n_pairs = fit_hue_concentration(chroma)
+    return {
+        "knots": np.array(basis.knots), "mean": basis.mean, "bases": basis.bases,
+        "fpca_bases": pca.bases, "fpca_variance": pca.variance,
+        "library_names": np.array(kept), "library_psi": psi, "library_chroma": chroma, "library_error": err,
+        "fit_names": np.array(names), "fit_controls": fits["controls"], "fit_chroma": fits["chroma"],
+        "fit_error": fits["error"], "fit_flags": np.array(["; ".join(f) for f in fits["flags"]]),
+        "gmm_weights": sel.gmm.weights, "gmm_means": sel.gmm.means, "gmm_covariances": sel.gmm.covariances,
+        "gmm_covariance_type": np.array(sel.covariance_type),
+        "gmm_bic": np.array([(1.0 if ct == "full" else 0.0, c, ll, bic) for ct, c, ll, bic in sel.table]),
+        "hue_kappa": np.array(kappa_h), "hue_pairs": np.array(n_pairs),
+        "excluded": np.array(exclude, dtype=str),
+    }
+
+
+def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, fits_from=None) -> dict:
+    """The whole build, written to ``out`` (a ``.npz``). ``fits_from``: a model
+    file whose stored full fits are reused instead of refitting them. Returns the arrays."""
+    t0 = time.perf_counter()
+    if fits_from is not None:
+        from .model_data import load_model
+        a = load_model(fits_from).arrays
+        if "fit_controls" not in a:
+            raise ModelError("%s holds no full fits to reuse" % fits_from)
+        fits = {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
+                "error": a["fit_error"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
+    else:
+        fits = fit_all(source, workers=workers, progress=progress)
+    arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress)
+    info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
+            "k": k, "excluded": list(exclude), "seed": SEED, "seconds": round(time.perf_counter() - t0, 1),
+            "python": platform.python_version(), "numpy": np.__version__,
+            "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
+                os.path.basename(os.fspath(source)), os.path.basename(os.fspath(out)),
+                "".join(" --exclude %s" % n for n in exclude))}
+    arrays["build_info"] = np.array(json.dumps(info))
+    save_model(out, arrays)
+    return arrays
+
+
+def save_model(path, arrays) -> None:
+    """Write a model file atomically (a temporary file renamed into place)."""
+    path = os.fspath(path)
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    tmp = path + ".tmp.npz"
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, path)

@@ -1,0 +1,355 @@
+"""Fitting DSBRDF materials to measured BRDFs (paper §3.1-3.2).
+
+A fit minimises the log-space error of Eq. 5 over measured samples of the MERL
+grid (:class:`Samples`), with SciPy's trust-region least squares and an analytic
+Jacobian. The κ/γ log-curve control values are an affine function of the free
+variables, ``ctrl = A p + b``, which covers the three models with one code path:
+
+* ``fit_full``: every control value free (3 lobes x 2 curves x 6 = 36, plus
+  2 chromaticity variables per lobe = 42 variables), from the best of a few
+  constant-curve starts, with a small curvature penalty that keeps curves
+  defined where grazing angles leave few samples;
+* ``fit_basis``: coefficients ψ of a learned :class:`~mi_dsbrdf.curves.CurveBasis`
+  (k, default 10) plus 2 chromaticity variables per lobe (16 for k = 10);
+* ``fit_constant``: one value per curve (the starts of ``fit_full``).
+
+Chromaticity c_r is a softmax of (z_r0, z_r1, 0): non-negative, sums to one,
+two free variables per lobe. Lobes are ordered by specularity after fitting:
+lobe 0 the broadest (smallest mean log γ), the last lobe the sharpest, so that
+curves of different materials are comparable for functional PCA.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .angles import from_half_diff, log_cos_h
+from .curves import DEFAULT_KNOTS, N_CONTROL, spline_matrix
+from .dsbrdf import LOG_GAMMA_MAX, LOG_KAPPA_MAX, Material, clamp_controls
+from .measured import N_PHI_D, N_THETA_D, N_THETA_H, grid_angles
+from .metrics import log_brdf, log_rmse
+
+N_LOBES = 3
+#: Bounds of fitted log kappa / log gamma control values. gamma >= 0.2 keeps a
+#: lobe a lobe (gamma -> 0 is a constant, Lambertian term); kappa >= e^-9 lets an
+#: unneeded lobe fade out without an unbounded log.
+LOG_KAPPA_BOUNDS = (-9.0, LOG_KAPPA_MAX)
+LOG_GAMMA_BOUNDS = (math.log(0.2), LOG_GAMMA_MAX - 1.0)
+#: Weight of the curvature penalty (second differences of control values).
+SMOOTHNESS = 0.02
+#: Constant-curve starts (gamma per lobe, kappa as fractions of the peak's log).
+STARTS = (((1.0, 60.0, 4000.0), (0.3, 0.8)),
+          ((2.0, 25.0, 800.0), (0.5, 0.5)),
+          ((0.5, 8.0, 200.0), (0.4, 0.7)))
+
+
+@dataclasses.dataclass(frozen=True)
+class Samples:
+    """Measured BRDF samples on the MERL grid, all directions above the horizon.
+
+    theta_h, theta_d, phi_d, cos_i : (N,) float64 (radians; cos theta_i > 0)
+    values : (N, 3) float64 BRDF values in 1/sr
+    """
+    theta_h: np.ndarray
+    theta_d: np.ndarray
+    phi_d: np.ndarray
+    cos_i: np.ndarray
+    values: np.ndarray
+    name: str = None
+
+    def __len__(self):
+        return self.theta_h.shape[0]
+
+
+def grid_subset(theta_d_step=3, phi_d_step=20):
+    """Indices (i_h, j_d, k_p) of MERL grid cells used for fitting.
+
+    Every theta_h (the square-root map is dense at the peak), every
+    ``theta_d_step``-th theta_d and every ``phi_d_step``-th phi_d, keeping only
+    cells whose incident and outgoing directions are both above the horizon
+    (cos > 1e-3). Returns three (N,) int64 arrays.
+    """
+    ih, jd, kp = np.meshgrid(np.arange(N_THETA_H), np.arange(0, N_THETA_D, theta_d_step),
+                             np.arange(0, N_PHI_D, phi_d_step), indexing="ij")
+    ih, jd, kp = ih.reshape(-1), jd.reshape(-1), kp.reshape(-1)
+    th, td, pd = grid_angles()
+    wi, wo = from_half_diff(th[ih], td[jd], pd[kp])
+    keep = (wi[2] > 1e-3) & (wo[2] > 1e-3)
+    return ih[keep], jd[keep], kp[keep]
+
+
+def samples_from_table(brdf, subset=None) -> Samples:
+    """Samples of a :class:`~mi_dsbrdf.measured.MeasuredBRDF` (unmeasured cells dropped)."""
+    ih, jd, kp = grid_subset() if subset is None else subset
+    keep = brdf.measured[ih, jd, kp]
+    ih, jd, kp = ih[keep], jd[keep], kp[keep]
+    return _samples(ih, jd, kp, brdf.table[ih, jd, kp].astype(np.float64), brdf.name)
+
+
+def samples_from_function(brdf, subset=None, name=None) -> Samples:
+    """Samples of ``brdf(theta_h, theta_d, phi_d) -> (N, 3)`` at the grid cells
+    (identical to tabulating it on the MERL grid and reading those cells)."""
+    ih, jd, kp = grid_subset() if subset is None else subset
+    th, td, pd = grid_angles()
+    values = np.asarray(brdf(th[ih], td[jd], pd[kp]), dtype=np.float64)
+    return _samples(ih, jd, kp, values, name)
+
+
+def _samples(ih, jd, kp, values, name) -> Samples:
+    th, td, pd = grid_angles()
+    wi, _ = from_half_diff(th[ih], td[jd], pd[kp])
+    if not np.all(np.isfinite(values)):
+        raise ValueError("measured values of %s are not finite" % (name or "material"))
+    return Samples(th[ih], td[jd], pd[kp], np.asarray(wi[2]), np.maximum(values, 0.0), name)
+
+
+# --- the least-squares problem -----------------------------------------------------
+
+class _Problem:
+    """Residuals and Jacobian of Eq. 5 for control values ctrl = A p + b."""
+
+    def __init__(self, samples: Samples, n_lobes, knots=DEFAULT_KNOTS):
+        self.B = spline_matrix(samples.theta_d, knots)                      # (N, 6)
+        self.lch = log_cos_h(np.cos(samples.theta_h), np.sin(samples.theta_h) ** 2)
+        self.c = samples.cos_i[:, None]
+        self.y = log_brdf(samples.values, samples.cos_i)                    # (N, 3)
+        self.scale = 1.0 / math.sqrt(self.y.size)                           # residuals -> RMSE
+        self.R = n_lobes
+        self.knots = knots
+
+    def lobes(self, ctrl):
+        """(N, R) lobe values L_r and their derivatives by the log kappa and
+        log gamma control values (clamped as in :func:`~mi_dsbrdf.dsbrdf.clamp_controls`;
+        zero derivative where a clamp is active): (L, dL_da (N, R, 6), dL_dg (N, R, 6))."""
+        lk, lg = clamp_controls(ctrl[:, 0], ctrl[:, 1])
+        free_k = (ctrl[:, 0] == lk).astype(np.float64)          # (R, 6)
+        free_g = (ctrl[:, 1] == lg).astype(np.float64)
+        gamma = np.exp(self.B @ lg.T)                           # (N, R)
+        u = np.exp(self.B @ lk.T + gamma * self.lch[:, None])   # kappa cos^gamma theta_h
+        L = np.expm1(u)
+        dL_a = (L + 1.0) * u
+        dL_g = dL_a * gamma * self.lch[:, None]
+        BB = self.B[:, None, :]
+        return L, dL_a[:, :, None] * BB * free_k[None], dL_g[:, :, None] * BB * free_g[None]
+
+    def residuals(self, ctrl, logits, jac=False):
+        """Residuals (3N,) and, with ``jac``, their Jacobians (3N, R*2*6) with
+        respect to the control values and (3N, R*2) to the chromaticity variables."""
+        L, dL_da, dL_dg = self.lobes(ctrl)
+        C = softmax_chroma(logits)                             # (R, 3)
+        rho = L @ C                                            # (N, 3)
+        res = (np.log1p(rho * self.c) - self.y) * self.scale
+        if not jac:
+            return res.reshape(-1), None, None
+        w = self.c / (1.0 + rho * self.c) * self.scale         # d res / d rho, (N, 3)
+        N, R = L.shape
+        # d rho_l / d ctrl[r, curve, j] = C[r, l] dL_r/d(curve) B_j
+        F = np.stack([dL_da, dL_dg], axis=2)                                # (N, R, 2, 6)
+        J_ctrl = np.empty((N, 3, R * 2 * N_CONTROL))
+        # softmax: d C[r, l] / d z[r, k] = C[r, l] (delta_lk - C[r, k]), k < 2
+        dC = C[:, :, None] * (np.eye(3)[None, :, :2] - C[:, None, :2])      # (R, 3, 2)
+        J_z = np.empty((N, 3, R * 2))
+        for l in range(3):
+            coef = w[:, l:l + 1] * C[None, :, l]                            # (N, R)
+            J_ctrl[:, l] = (coef[:, :, None, None] * F).reshape(N, -1)
+            J_z[:, l] = ((w[:, l:l + 1] * L)[:, :, None] * dC[None, :, l, :]).reshape(N, -1)
+        return res.reshape(-1), J_ctrl.reshape(3 * N, -1), J_z.reshape(3 * N, -1)
+
+
+def softmax_chroma(logits) -> np.ndarray:
+    """(R, 3) chromaticities from (R, 2) free variables: softmax of (z0, z1, 0)."""
+    z = np.concatenate([np.asarray(logits, dtype=np.float64).reshape(-1, 2), np.zeros((len(logits), 1))], axis=1)
+    z = z - z.max(axis=1, keepdims=True)
+    e = np.exp(z)
+    return e / e.sum(axis=1, keepdims=True)
+
+
+def chroma_logits(chromaticity, floor=1e-6) -> np.ndarray:
+    """Inverse of :func:`softmax_chroma` (chromaticities floored at ``floor``)."""
+    c = np.maximum(np.asarray(chromaticity, dtype=np.float64), floor)
+    return np.log(c[:, :2]) - np.log(c[:, 2:3])
+
+
+def _second_differences(n_curves):
+    """(n_curves * 4, n_curves * 6) operator of second differences of control values."""
+    d2 = np.diff(np.eye(N_CONTROL), n=2, axis=0)
+    return np.kron(np.eye(n_curves), d2)
+
+
+@dataclasses.dataclass
+class Fit:
+    """Result of a fit: the material, its Eq. 5 error on the samples, diagnostics."""
+    material: Material
+    error: float
+    iterations: int
+    at_bounds: list       # lobes whose curves touch a bound ("lobe 2 gamma max", ...)
+    variables: np.ndarray  # psi of a basis fit; (R, 2, 6) control values of a full fit
+
+
+def levenberg_marquardt(fun, x0, lower=None, upper=None, max_iter=100, tol=1e-6):
+    """Minimise 1/2 |r(x)|^2 by Levenberg-Marquardt with box bounds (projected steps).
+
+    ``fun(x) -> (r, J)``. The normal equations are P x P (P <= 42 here), so a
+    step costs one Jacobian and a tiny solve instead of an SVD of the whole
+    (3N x P) Jacobian. Stops when a step lowers the cost by less than ``tol``
+    relative, or after ``max_iter`` Jacobians. Returns (x, cost, iterations).
+    """
+    lo = np.full_like(x0, -np.inf) if lower is None else lower
+    hi = np.full_like(x0, np.inf) if upper is None else upper
+    x = np.clip(np.asarray(x0, dtype=np.float64), lo, hi)
+    r, J = fun(x, True)
+    cost = 0.5 * float(r @ r)
+    lam = 1e-3
+    for it in range(1, max_iter + 1):
+        g = J.T @ r
+        H = J.T @ J
+        d = np.diag(H).copy() + 1e-12
+        improved = False
+        for _ in range(12):
+            try:
+                step = -np.linalg.solve(H + lam * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            x_new = np.clip(x + step, lo, hi)
+            r_new, _ = fun(x_new, False)
+            cost_new = 0.5 * float(r_new @ r_new)
+            if np.isfinite(cost_new) and cost_new < cost:
+                improved = True
+                break
+            lam *= 8.0
+        if not improved:
+            return x, cost, it
+        gain = (cost - cost_new) / max(cost, 1e-300)
+        x, cost = x_new, cost_new
+        lam = max(lam / 5.0, 1e-9)
+        if gain < tol:
+            return x, cost, it
+        r, J = fun(x, True)
+    return x, cost, max_iter
+
+
+def _solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_iter=100):
+    """Fit ctrl = A p + b and chromaticity variables z from (p0, z0)."""
+    R = problem.R
+    P = A.shape[1]
+    identity = A.shape[0] == P and np.array_equal(A, np.eye(P))
+    D2 = _second_differences(2 * R) * smoothness
+    D = D2 @ A if smoothness else None
+    Db = D2 @ b if smoothness else None
+
+    def unpack(x):
+        return (A @ x[:P] + b).reshape(R, 2, N_CONTROL), x[P:].reshape(R, 2)
+
+    def fun(x, jac):
+        ctrl, z = unpack(x)
+        r, Jc, Jz = problem.residuals(ctrl, z, jac=jac)
+        if D is not None:
+            r = np.concatenate([r, D @ x[:P] + Db])
+        if not jac:
+            return r, None
+        J = np.zeros((r.size, P + 2 * R))
+        n = Jc.shape[0]
+        J[:n, :P] = Jc if identity else Jc @ A
+        J[:n, P:] = Jz
+        if D is not None:
+            J[n:, :P] = D
+        return r, J
+
+    x0 = np.concatenate([p0, np.asarray(z0, dtype=np.float64).reshape(-1)])
+    zb = np.full(2 * R, 30.0)
+    lo = np.concatenate([np.full(P, -np.inf) if lower is None else lower, -zb])
+    hi = np.concatenate([np.full(P, np.inf) if upper is None else upper, zb])
+    x, cost, iters = levenberg_marquardt(fun, x0, lo, hi, max_iter=max_iter)
+    ctrl, z = unpack(x)
+    return ctrl, softmax_chroma(z), x, cost, iters
+
+
+def _control_bounds(n):
+    """Lower and upper bounds of (N_LOBES, 2, n) log-curve variables, flattened."""
+    lo = np.empty((N_LOBES, 2, n))
+    hi = np.empty((N_LOBES, 2, n))
+    lo[:, 0], hi[:, 0] = LOG_KAPPA_BOUNDS
+    lo[:, 1], hi[:, 1] = LOG_GAMMA_BOUNDS
+    return lo.reshape(-1), hi.reshape(-1)
+
+
+def order_lobes(ctrl, chroma):
+    """Sort lobes by specularity (mean log gamma control value, ascending)."""
+    order = np.argsort(ctrl[:, 1].mean(axis=1), kind="stable")
+    return ctrl[order], chroma[order]
+
+
+def _result(samples, ctrl, chroma, iters, name, knots, psi=None) -> Fit:
+    if psi is None:
+        ctrl, chroma = order_lobes(ctrl, chroma)
+    ctrl = np.stack(clamp_controls(ctrl[:, 0], ctrl[:, 1]), axis=1)
+    mat = Material(ctrl[:, 0], ctrl[:, 1], chroma, knots=knots, name=name, psi=psi)
+    flags = []
+    for r in range(ctrl.shape[0]):
+        if ctrl[r, 1].max() >= LOG_GAMMA_BOUNDS[1] - 1e-3:
+            flags.append("lobe %d gamma at max" % r)
+        if ctrl[r, 1].min() <= LOG_GAMMA_BOUNDS[0] + 1e-3:
+            flags.append("lobe %d gamma at min" % r)
+    err = log_rmse(mat.eval(samples.theta_h, samples.theta_d), samples.values, samples.cos_i)
+    return Fit(mat, err, iters, flags, ctrl.copy() if psi is None else psi)
+
+
+def _initial_chroma(samples):
+    """Grey lobes, the broadest one with the colour of the data's diffuse floor."""
+    far = samples.theta_h > math.radians(30)
+    col = samples.values[far].mean(axis=0) if np.any(far) else samples.values.mean(axis=0)
+    c = np.full((N_LOBES, 3), 1 / 3)
+    if np.all(col > 0):
+        c[0] = col / col.sum()
+    return chroma_logits(c)
+
+
+def fit_constant(samples: Samples, gamma, kappa, z0, max_iter=25):
+    """Constant curves (one log kappa, one log gamma per lobe) fitted from a start.
+
+    Returns (ctrl (R, 2, 6), chromaticity (R, 3), cost)."""
+    problem = _Problem(samples, N_LOBES)
+    A = np.kron(np.eye(2 * N_LOBES), np.ones((N_CONTROL, 1)))   # (36, 6): one value per curve
+    p0 = np.stack([np.log(kappa), np.log(gamma)], axis=1).reshape(-1)
+    lo, hi = _control_bounds(1)
+    ctrl, chroma, _, cost, _ = _solve(problem, A, np.zeros(A.shape[0]), p0, z0, lo, hi, max_iter=max_iter)
+    return ctrl, chroma, cost
+
+
+def fit_full(samples: Samples, name=None, smoothness=SMOOTHNESS, max_iter=80) -> Fit:
+    """The colour-separated 3-lobe B-spline DSBRDF (42 variables) minimising Eq. 5,
+    from the best of the constant-curve starts :data:`STARTS`."""
+    problem = _Problem(samples, N_LOBES)
+    lum = samples.values.mean(axis=1)
+    peak = float(np.max(lum))
+    far = samples.theta_h > math.radians(30)
+    floor = float(np.median(lum[far])) if np.any(far) else 1e-3
+    K = max(math.log1p(max(peak, 1e-6)), 1e-3)
+    z0 = _initial_chroma(samples)
+    best = None
+    for gammas, (f1, f2) in STARTS:
+        kappa = np.clip([math.log1p(max(floor, 1e-6)), f1 * K, f2 * K], 1e-3, 80.0)
+        ctrl, chroma, cost = fit_constant(samples, np.array(gammas), kappa, z0)
+        if best is None or cost < best[2]:
+            best = (ctrl, chroma, cost)
+    ctrl0, chroma0, _ = best
+    lo, hi = _control_bounds(N_CONTROL)
+    n = 2 * N_LOBES * N_CONTROL
+    ctrl, chroma, _, _, iters = _solve(problem, np.eye(n), np.zeros(n), ctrl0.reshape(-1), chroma_logits(chroma0),
+                                       lo, hi, smoothness=smoothness, max_iter=max_iter)
+    return _result(samples, ctrl, chroma, iters, name or samples.name, problem.knots)
+
+
+def fit_basis(samples: Samples, basis, psi0=None, chroma0=None, name=None, max_iter=100) -> Fit:
+    """The colour-separated basis model: k coefficients psi + 2 chromaticity
+    variables per lobe, minimising Eq. 5 (starting at psi0, default 0)."""
+    problem = _Problem(samples, basis.n_lobes, basis.knots)
+    A = basis.bases.reshape(basis.n_bases, -1).T
+    psi0 = np.zeros(basis.n_bases) if psi0 is None else np.asarray(psi0, dtype=np.float64)
+    z0 = _initial_chroma(samples) if chroma0 is None else chroma_logits(chroma0)
+    ctrl, chroma, x, _, iters = _solve(problem, A, basis.mean.reshape(-1), psi0, z0, max_iter=max_iter)
+    psi = x[:basis.n_bases]
+    return _result(samples, ctrl, chroma, iters, name or samples.name, basis.knots, psi=psi)

@@ -1,0 +1,233 @@
+"""Priors of the posterior (paper §4), as negative log densities with gradients.
+
+Reflectance
+  * :class:`GaussianMixture` — Eq. 6, a Gaussian mixture on the basis
+    coefficients psi, fitted by EM (:func:`fit_gmm`), the number of components
+    and covariance type chosen by BIC (:func:`select_gmm`).
+  * :class:`HuePrior` — Eq. 7-12, a von Mises prior on the angle between the hue
+    vectors of every pair of lobes; the concentration kappa_h is fitted by
+    maximum likelihood (:func:`fit_hue_concentration`).
+
+All functions take float64 numpy arrays and return float64; ``nll`` methods
+return -log p up to the constants stated, ``grad`` methods its gradient.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+from scipy.optimize import brentq
+from scipy.special import i0e, i1e, logsumexp
+
+# --- Gaussian mixture on psi (Eq. 6) -----------------------------------------------
+
+
+class GaussianMixture:
+    """p(psi) = sum_c w_c N(psi; mu_c, Sigma_c).
+
+    weights (C,), means (C, k), covariances (C, k, k): float64 arrays;
+    covariances symmetric positive definite.
+    """
+
+    def __init__(self, weights, means, covariances):
+        self.weights = np.asarray(weights, dtype=np.float64).reshape(-1)
+        self.means = np.asarray(means, dtype=np.float64)
+        self.covariances = np.asarray(covariances, dtype=np.float64)
+        C = self.weights.size
+        if self.means.ndim != 2 or self.means.shape[0] != C:
+            raise ValueError("GMM means must be (%d, k), got %s" % (C, self.means.shape))
+        k = self.means.shape[1]
+        if self.covariances.shape != (C, k, k):
+            raise ValueError("GMM covariances must be (%d, %d, %d), got %s" % (C, k, k, self.covariances.shape))
+        if not (np.all(np.isfinite(self.weights)) and np.all(self.weights >= 0)
+                and abs(self.weights.sum() - 1) < 1e-6):
+            raise ValueError("GMM weights must be non-negative and sum to 1")
+        try:
+            self._chol = np.linalg.cholesky(self.covariances)
+        except np.linalg.LinAlgError:
+            raise ValueError("GMM covariances must be positive definite") from None
+        self._prec = np.linalg.inv(self.covariances)
+        logdet = 2 * np.log(np.diagonal(self._chol, axis1=1, axis2=2)).sum(axis=1)
+        self._log_norm = np.log(np.maximum(self.weights, 1e-300)) - 0.5 * (logdet + k * math.log(2 * math.pi))
+
+    @property
+    def n_components(self) -> int:
+        return self.weights.size
+
+    @property
+    def dim(self) -> int:
+        return self.means.shape[1]
+
+    def _component_logs(self, x):
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        diff = x[:, None, :] - self.means[None]                              # (M, C, k)
+        sol = np.einsum("cij,mcj->mci", self._prec, diff)
+        return self._log_norm[None] - 0.5 * np.einsum("mci,mci->mc", diff, sol), sol
+
+    def log_density(self, x) -> np.ndarray:
+        """log p(psi) for psi of shape (k,) (returns a float) or (M, k) (returns (M,))."""
+        lc, _ = self._component_logs(x)
+        out = logsumexp(lc, axis=1)
+        return float(out[0]) if np.ndim(x) == 1 else out
+
+    def nll(self, psi) -> float:
+        """-log p(psi) (Eq. 6), exact with its normalisation."""
+        return -self.log_density(np.asarray(psi, dtype=np.float64).reshape(-1))
+
+    def grad(self, psi) -> np.ndarray:
+        """d(-log p)/d psi = sum_c resp_c Sigma_c^-1 (psi - mu_c), shape (k,)."""
+        lc, sol = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1))
+        resp = np.exp(lc - logsumexp(lc, axis=1, keepdims=True))
+        return (resp[:, :, None] * sol).sum(axis=1)[0]
+
+    def n_parameters(self, covariance_type="full") -> int:
+        C, k = self.n_components, self.dim
+        cov = k * (k + 1) // 2 if covariance_type == "full" else k
+        return (C - 1) + C * k + C * cov
+
+
+def fit_gmm(X, n_components, covariance_type="full", seed=0, n_init=5, max_iter=500, reg=1e-3):
+    """Fit a Gaussian mixture to rows of ``X`` (M, k) by EM.
+
+    k-means++ starts from ``np.random.default_rng(seed)``; the best of
+    ``n_init`` runs by log likelihood is returned as (GaussianMixture, loglik).
+    ``reg`` times the mean per-dimension variance is added to each covariance
+    diagonal, which keeps components of few points well conditioned.
+    """
+    X = np.asarray(X, dtype=np.float64)
+    M, k = X.shape
+    if n_components > M:
+        raise ValueError("cannot fit %d components to %d points" % (n_components, M))
+    rng = np.random.default_rng(seed)
+    floor = reg * max(float(X.var(axis=0).mean()), 1e-12)
+    best = None
+    for _ in range(n_init):
+        centres = [X[rng.integers(M)]]
+        for _ in range(1, n_components):
+            d2 = np.min([((X - c) ** 2).sum(axis=1) for c in centres], axis=0)
+            p = d2 / d2.sum() if d2.sum() > 0 else np.full(M, 1 / M)
+            centres.append(X[rng.choice(M, p=p)])
+        labels = np.argmin([((X - c) ** 2).sum(axis=1) for c in centres], axis=0)
+        resp = np.eye(n_components)[labels]
+        prev = -np.inf
+        for _ in range(max_iter):
+            gmm = _m_step(X, resp, covariance_type, floor)
+            lc, _ = gmm._component_logs(X)
+            ll = float(logsumexp(lc, axis=1).sum())
+            resp = np.exp(lc - logsumexp(lc, axis=1, keepdims=True))
+            if ll - prev < 1e-8 * abs(ll):
+                break
+            prev = ll
+        if best is None or ll > best[1]:
+            best = (gmm, ll)
+    return best
+
+
+def _m_step(X, resp, covariance_type, floor):
+    nk = resp.sum(axis=0) + 1e-12
+    weights = nk / nk.sum()
+    means = (resp.T @ X) / nk[:, None]
+    covs = []
+    for c in range(resp.shape[1]):
+        d = X - means[c]
+        cov = (resp[:, c, None] * d).T @ d / nk[c]
+        if covariance_type == "diag":
+            cov = np.diag(np.diag(cov))
+        covs.append(cov + floor * np.eye(X.shape[1]))
+    return GaussianMixture(weights, means, np.array(covs))
+
+
+@dataclasses.dataclass
+class GMMSelection:
+    gmm: GaussianMixture
+    covariance_type: str
+    table: list     # [(covariance_type, n_components, loglik, bic), ...]
+
+
+def select_gmm(X, max_components=5, covariance_types=("full", "diag"), seed=0) -> GMMSelection:
+    """Fit 1..max_components components of each covariance type; keep the lowest
+    BIC = -2 log L + n_parameters log M."""
+    X = np.asarray(X, dtype=np.float64)
+    M = X.shape[0]
+    table, best = [], None
+    for ct in covariance_types:
+        for C in range(1, min(max_components, M) + 1):
+            gmm, ll = fit_gmm(X, C, ct, seed=seed)
+            bic = -2 * ll + gmm.n_parameters(ct) * math.log(M)
+            table.append((ct, C, ll, bic))
+            if best is None or bic < best[2]:
+                best = (gmm, ct, bic)
+    return GMMSelection(best[0], best[1], table)
+
+
+# --- von Mises hue prior (Eq. 7-12) ---------------------------------------------------
+
+#: Saturation |c - 1/3| below which a hue vector is treated as undefined (grey).
+HUE_EPS = 1e-3
+
+
+def hue_vectors(chromaticity) -> np.ndarray:
+    """(R, 3) hue vectors: chromaticity minus grey, i.e. projected onto the plane
+    orthogonal to (1, 1, 1) (chromaticities sum to one)."""
+    return np.asarray(chromaticity, dtype=np.float64) - 1.0 / 3.0
+
+
+def hue_cosines(chromaticity) -> np.ndarray:
+    """cos of the angle between the hue vectors of every pair of lobes (r < s),
+    softened by HUE_EPS so that a grey lobe gives 0 (no preference) and a finite gradient."""
+    h = hue_vectors(chromaticity)
+    n = np.sqrt((h * h).sum(axis=1) + HUE_EPS ** 2)
+    return np.array([h[r] @ h[s] / (n[r] * n[s]) for r, s in itertools.combinations(range(len(h)), 2)])
+
+
+class HuePrior:
+    """p(c) prop. to prod_{r<s} exp(kappa_h cos(angle(h_r, h_s))) / (2 pi I0(kappa_h))."""
+
+    def __init__(self, kappa_h):
+        self.kappa_h = float(kappa_h)
+        if not (math.isfinite(self.kappa_h) and self.kappa_h >= 0):
+            raise ValueError("hue concentration kappa_h must be finite and >= 0, got %r" % kappa_h)
+
+    def nll(self, chromaticity) -> float:
+        cos = hue_cosines(chromaticity)
+        log_norm = math.log(2 * math.pi) + math.log(i0e(self.kappa_h)) + self.kappa_h
+        return float(-self.kappa_h * cos.sum() + cos.size * log_norm)
+
+    def grad(self, chromaticity) -> np.ndarray:
+        """d(-log p)/d chromaticity, shape (R, 3)."""
+        h = hue_vectors(chromaticity)
+        R = h.shape[0]
+        n = np.sqrt((h * h).sum(axis=1) + HUE_EPS ** 2)
+        g = np.zeros_like(h)
+        for r, s in itertools.combinations(range(R), 2):
+            dot = h[r] @ h[s]
+            # d cos / d h_r = h_s/(n_r n_s) - dot h_r / (n_r^3 n_s)
+            g[r] += h[s] / (n[r] * n[s]) - dot * h[r] / (n[r] ** 3 * n[s])
+            g[s] += h[r] / (n[r] * n[s]) - dot * h[s] / (n[s] ** 3 * n[r])
+        return -self.kappa_h * g
+
+
+def fit_hue_concentration(chromaticities, min_saturation=0.02) -> tuple:
+    """Maximum-likelihood kappa_h from (M, R, 3) lobe chromaticities.
+
+    Pairs of lobes that are both saturated (|c - 1/3| >= ``min_saturation``)
+    give angles theta_i; the ML estimate solves A(kappa) = I1/I0(kappa) =
+    mean cos theta_i. Returns (kappa_h, number of pairs used).
+    """
+    cos = []
+    for c in np.asarray(chromaticities, dtype=np.float64):
+        h = hue_vectors(c)
+        n = np.linalg.norm(h, axis=1)
+        for r, s in itertools.combinations(range(len(h)), 2):
+            if n[r] >= min_saturation and n[s] >= min_saturation:
+                cos.append(h[r] @ h[s] / (n[r] * n[s]))
+    if not cos:
+        return 0.0, 0
+    rbar = float(np.mean(cos))
+    if rbar <= 0:
+        return 0.0, len(cos)
+    rbar = min(rbar, 1 - 1e-9)
+    kappa = brentq(lambda k: i1e(k) / i0e(k) - rbar, 1e-9, 1e9)
+    return float(kappa), len(cos)

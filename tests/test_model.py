@@ -1,0 +1,132 @@
+"""The reflectance model: build (leave-one-out), shipped file, library from XML, malformed files."""
+import json
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import mi_dsbrdf
+from mi_dsbrdf import ModelError, build_model, model_data
+from mi_dsbrdf.library import library_names, load_material
+from mi_dsbrdf.model_data import load_model
+
+from test_fpca import training_curves
+
+
+def synthetic_fits(M=16):
+    rng = np.random.default_rng(5)
+    return {"names": ["mat-%02d" % i for i in range(M)], "controls": training_curves(M),
+            "chroma": rng.dirichlet(np.ones(3) * 5, (M, 3)), "error": rng.uniform(0, .1, M),
+            "flags": [[] for _ in range(M)]}
+
+
+def test_leave_one_out_really_excludes_the_material(tmp_path):
+    fits = synthetic_fits()
+    full = build_model.build_from_fits(fits, k=4, refit=False, progress=False)
+    loo = build_model.build_from_fits(fits, k=4, exclude=["mat-03"], refit=False, progress=False)
+    assert "mat-03" in list(full["library_names"]) and "mat-03" not in list(loo["library_names"])
+    others = np.delete(fits["controls"], 3, axis=0)
+    np.testing.assert_allclose(loo["mean"], others.mean(axis=0))          # b_mu without it
+    assert not np.allclose(loo["mean"], full["mean"])
+    np.testing.assert_allclose(loo["gmm_means"].T @ loo["gmm_weights"], loo["library_psi"].mean(axis=0),
+                               atol=1e-8)                                   # GMM fitted to the others only
+    assert list(loo["excluded"]) == ["mat-03"]
+    build_model.save_model(tmp_path / "loo.npz", loo)
+    m = load_model(tmp_path / "loo.npz")
+    assert m.excluded == ["mat-03"] and "mat-03" not in m.library
+    with pytest.raises(ModelError, match="not among"):
+        build_model.build_from_fits(fits, k=4, exclude=["nope"], refit=False, progress=False)
+    with pytest.raises(ModelError, match="too few"):
+        build_model.build_from_fits(fits, k=14, exclude=["mat-00"], refit=False, progress=False)
+
+
+def _arrays(tmp_path, **override):
+    a = build_model.build_from_fits(synthetic_fits(), k=4, refit=False, progress=False)
+    a["library_psi"] = np.nan_to_num(a["library_psi"])
+    a.update(override)
+    for k in [k for k, v in override.items() if v is None]:
+        del a[k]
+    p = tmp_path / "m.npz"
+    np.savez(p, **a)
+    return p
+
+
+@pytest.mark.parametrize("override,message", [
+    (dict(gmm_weights=np.array([1.0]), gmm_means=np.zeros((1, 4)), gmm_covariances=-np.eye(4)[None]),
+     "positive definite"),
+    (dict(gmm_weights=np.array([1.0]), gmm_means=np.zeros((1, 3)), gmm_covariances=np.eye(3)[None]),
+     "over 3 coefficients but the basis has 4"),
+    (dict(hue_kappa=np.array(-1.0)), "kappa_h"),
+    (dict(library_chroma=np.full((16, 3, 3), np.nan)), "finite"),
+    (dict(build_info=np.array("{not json")), "build_info"),
+    (dict(mean=None), "lacks the arrays mean"),
+])
+def test_malformed_model_files_give_clear_errors(tmp_path, override, message):
+    with pytest.raises(ModelError, match=message):
+        load_model(_arrays(tmp_path, **override))
+
+
+def test_model_file_priors_load(tmp_path):
+    m = load_model(_arrays(tmp_path))
+    assert m.gmm.dim == 4 and np.isfinite(m.gmm.nll(np.zeros(4)))
+    assert m.hue_prior.kappa_h >= 0
+
+
+# --- the shipped model (built from MERL by `mi-dsbrdf build-model`) -------------------------
+
+def shipped():
+    m = model_data.shipped_model()
+    assert m is not None, "mi_dsbrdf/data/model.npz is missing: run mi-dsbrdf build-model"
+    return m
+
+
+def test_shipped_model_is_complete_and_sane():
+    m = shipped()
+    assert m.basis.n_bases == 10 and m.basis.n_lobes == 3
+    assert len(m.library) == 100 and not m.excluded
+    assert m.gmm is not None and m.gmm.dim == 10 and m.hue_prior is not None
+    a = m.arrays
+    assert np.all(np.isfinite(a["fit_error"])) and np.all(np.isfinite(a["library_error"]))
+    assert np.median(a["library_error"]) < 0.1
+    assert json.loads(str(a["build_info"]))["k"] == 10
+    assert library_names() == sorted(m.library)
+
+
+def test_library_material_by_name_renders_like_explicit_parameters():
+    name = "gold-metallic-paint"
+    mat = load_material(name)
+    assert mat.name == name and mat.eval([0.0, 0.5], [0.1, 0.3]).shape == (2, 3)
+    explicit = {"type": "dsbrdf", "lobes": mat.n_lobes}
+    for r in range(mat.n_lobes):
+        explicit["kappa_%d" % r] = " ".join("%.17g" % v for v in np.exp(mat.log_kappa[r]))
+        explicit["gamma_%d" % r] = " ".join("%.17g" % v for v in np.exp(mat.log_gamma[r]))
+        explicit["chromaticity_%d" % r] = " ".join("%.17g" % v for v in mat.chromaticity[r])
+    from test_render import small_scene
+    a = np.array(mi.render(small_scene({"type": "dsbrdf", "material": name}, "direct"), seed=1))
+    b = np.array(mi.render(small_scene(explicit, "direct"), seed=1))
+    assert a.max() > 0
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+    # and from an XML string, as a user writes it
+    bsdf = mi.load_string('<bsdf version="3.0.0" type="dsbrdf"><string name="material" value="%s"/></bsdf>' % name)
+    assert bsdf is not None
+
+
+def test_bare_dsbrdf_is_the_model_mean():
+    m = shipped()
+    d = mi_dsbrdf.library.default_material()
+    np.testing.assert_allclose(d.log_kappa, m.basis.mean[:, 0])
+
+
+def test_shipped_library_matches_the_measurements(nbrdf_file):
+    """Rebuilding one library entry from the data reproduces its stored error."""
+    from mi_dsbrdf import fitting
+    m = shipped()
+    names = [str(n) for n in m.arrays["library_names"]]
+    i = names.index("pink-felt")
+    s = build_model.load_samples(nbrdf_file, "pink-felt")
+    mat = m.library_material("pink-felt")
+    from mi_dsbrdf.metrics import log_rmse
+    err = log_rmse(mat.eval(s.theta_h, s.theta_d), s.values, s.cos_i)
+    assert err == pytest.approx(float(m.arrays["library_error"][i]), rel=1e-4)
+    assert err < 0.05
+    del fitting

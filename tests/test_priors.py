@@ -1,0 +1,102 @@
+"""Reflectance priors: Gaussian mixture on psi (Eq. 6) and hue prior (Eq. 7-12)."""
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from mi_dsbrdf.priors import (GaussianMixture, HuePrior, fit_gmm, fit_hue_concentration, hue_cosines,
+                              select_gmm)
+
+
+def three_clusters(seed=0):
+    rng = np.random.default_rng(seed)
+    centres = np.array([[-4.0, 0, 0], [0, 4.0, 0], [4.0, 0, 1.0]])
+    return np.concatenate([c + rng.normal(0, 0.5, (60, 3)) for c in centres])
+
+
+def random_gmm(k=4, C=3, seed=1):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(C, k, k))
+    return GaussianMixture(rng.dirichlet(np.ones(C)), rng.normal(0, 2, (C, k)),
+                           A @ A.transpose(0, 2, 1) + 0.5 * np.eye(k))
+
+
+def test_gmm_density_matches_scipy():
+    g = random_gmm()
+    x = np.random.default_rng(2).normal(size=(20, 4))
+    expect = np.log(sum(w * multivariate_normal(m, c).pdf(x) for w, m, c in zip(g.weights, g.means, g.covariances)))
+    np.testing.assert_allclose(g.log_density(x), expect, rtol=1e-10)
+    assert g.nll(x[0]) == pytest.approx(-expect[0])
+
+
+def test_gmm_gradient_matches_finite_differences_and_is_finite_far_away():
+    g = random_gmm()
+    for x in (np.array([0.3, -0.2, 1.0, 0.5]), np.array([40.0, -30.0, 25.0, 60.0])):
+        grad = g.grad(x)
+        assert np.all(np.isfinite(grad)) and np.isfinite(g.nll(x))
+        h = 1e-6 * max(1.0, np.abs(x).max())
+        fd = np.array([(g.nll(x + h * e) - g.nll(x - h * e)) / (2 * h) for e in np.eye(4)])
+        np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-6)
+
+
+def test_bic_finds_three_clusters_and_em_is_seeded():
+    X = three_clusters()
+    sel = select_gmm(X, max_components=5)
+    assert sel.gmm.n_components == 3
+    means = sel.gmm.means[np.argsort(sel.gmm.means[:, 0])]
+    np.testing.assert_allclose(means[:, :2], [[-4, 0], [0, 4], [4, 0]], atol=0.2)
+    a, _ = fit_gmm(X, 3, seed=7)
+    b, _ = fit_gmm(X, 3, seed=7)
+    np.testing.assert_array_equal(a.means, b.means)
+
+
+def test_gmm_rejects_bad_parameters():
+    with pytest.raises(ValueError, match="positive definite"):
+        GaussianMixture([1.0], [[0.0, 0.0]], [[[1.0, 2.0], [2.0, 1.0]]])
+    with pytest.raises(ValueError, match="sum to 1"):
+        GaussianMixture([0.5], [[0.0]], [[[1.0]]])
+
+
+def test_hue_prior_gradient_matches_finite_differences_including_grey_lobes():
+    p = HuePrior(2.5)
+    for c in (np.array([[0.5, 0.3, 0.2], [0.2, 0.5, 0.3], [0.34, 0.33, 0.33]]),
+              np.full((3, 3), 1 / 3),
+              np.array([[0.9, 0.05, 0.05], [0.6, 0.2, 0.2]])):
+        g = p.grad(c)
+        assert np.all(np.isfinite(g))
+        h = 1e-7
+        fd = np.zeros_like(c)
+        for idx in np.ndindex(c.shape):
+            e = np.zeros_like(c)
+            e[idx] = h
+            fd[idx] = (p.nll(c + e) - p.nll(c - e)) / (2 * h)
+        np.testing.assert_allclose(g, fd, rtol=1e-4, atol=1e-5)
+
+
+def test_hue_prior_prefers_aligned_hues_and_is_normalised():
+    p = HuePrior(3.0)
+    same = np.array([[0.5, 0.3, 0.2], [0.45, 0.32, 0.23]])
+    opposite = np.array([[0.5, 0.3, 0.2], [0.2, 0.35, 0.45]])
+    assert p.nll(same) < p.nll(opposite)
+    # one pair: exp(-nll) integrates to one over the angle
+    th = np.linspace(-np.pi, np.pi, 20001)
+    dens = np.exp(3.0 * np.cos(th)) / (2 * np.pi * np.i0(3.0))
+    assert np.trapezoid(dens, th) == pytest.approx(1.0, rel=1e-6)
+    assert math.exp(-p.nll(same)) == pytest.approx(np.exp(3.0 * hue_cosines(same)[0]) / (2 * np.pi * np.i0(3.0)),
+                                                   rel=1e-6)
+
+
+def test_hue_concentration_maximum_likelihood():
+    rng = np.random.default_rng(4)
+    kappa = 4.0
+    chroma = []
+    for a in rng.vonmises(0, kappa, 4000):
+        base = rng.uniform(0, 2 * np.pi)
+        u, v = np.array([1, -1, 0]) / np.sqrt(2), np.array([1, 1, -2]) / np.sqrt(6)
+        hue = [0.1 * (np.cos(t) * u + np.sin(t) * v) for t in (base, base + a)]
+        chroma.append([1 / 3 + h for h in hue])
+    k, n = fit_hue_concentration(np.array(chroma))
+    assert n == 4000 and k == pytest.approx(kappa, rel=0.08)
+    with pytest.raises(ValueError, match="kappa_h"):
+        HuePrior(float("nan"))
