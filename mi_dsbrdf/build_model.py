@@ -93,6 +93,9 @@ def _map(fn, jobs, workers, desc, progress):
             bar.update()
     else:
         import multiprocessing
+        # one BLAS thread per worker: the workers already fill the cores
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as ex:
             for r in ex.map(fn, jobs):
                 out.append(r)

@@ -28,3 +28,17 @@ def test_render_missing_scene_is_a_clear_error(tmp_path, capsys):
     assert main(["render", str(tmp_path / "nope.xml"), "--out", str(tmp_path / "o")]) == 1
     assert "no scene" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys):
+    existing = tmp_path / "model.npz"
+    existing.write_bytes(b"keep me")
+    r = subprocess.run([sys.executable, "-m", "mi_dsbrdf.cli", "build-model", "--merl", str(tmp_path),
+                        "--out", str(existing)], capture_output=True, text=True)
+    assert r.returncode != 0 and "--force" in r.stderr
+    assert existing.read_bytes() == b"keep me"
+    assert main(["build-model", "--merl", str(tmp_path / "missing.npz"), "--out", str(tmp_path / "m.npz")]) == 1
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["build-model", "--merl", str(tmp_path), "--out", str(tmp_path / "m.npz")]) == 1
+    assert "no MERL .binary files" in capsys.readouterr().err
+    assert not (tmp_path / "m.npz").exists()
