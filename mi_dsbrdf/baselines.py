@@ -15,9 +15,13 @@ import math
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.special import expit
 
 from .angles import from_half_diff
 from .metrics import log_brdf, log_rmse
+
+
+LOG_M_MIN, LOG_M_MAX = math.log(1e-3), math.log(2.0)
 
 
 def cook_torrance(params, theta_h, theta_d, phi_d, n_lobes) -> np.ndarray:
@@ -31,11 +35,12 @@ def cook_torrance(params, theta_h, theta_d, phi_d, n_lobes) -> np.ndarray:
     G = np.minimum(1.0, np.minimum(2 * ch * co / cd, 2 * ch * ci / cd))
     tan2 = np.sin(th) ** 2 / np.maximum(ch ** 2, 1e-12)
     schlick = (1.0 - cd) ** 5
-    out = np.repeat((np.exp(p[:3]) / math.pi)[None], th.size, axis=0)
+    out = np.repeat((np.exp(np.clip(p[:3], -30, 20)) / math.pi)[None], th.size, axis=0)
     for lobe in range(n_lobes):
         q = p[3 + 7 * lobe: 10 + 7 * lobe]
-        ks, m2 = np.exp(q[:3]), math.exp(2 * q[3])
-        f0 = 1.0 / (1.0 + np.exp(-q[4:7]))
+        # clipped exponents: an optimiser's trial step never overflows to inf * 0
+        ks, m2 = np.exp(np.clip(q[:3], -30, 20)), math.exp(2 * min(max(q[3], LOG_M_MIN), LOG_M_MAX))
+        f0 = expit(q[4:7])
         D = np.exp(-tan2 / m2) / (math.pi * m2 * np.maximum(ch, 1e-6) ** 4)
         F = f0[None] + (1 - f0[None]) * schlick[:, None]
         out += ks[None] * (D * G / (4 * ci * co))[:, None] * F
