@@ -1,8 +1,8 @@
 """Fitting DSBRDF materials to measured BRDFs (paper §3.1-3.2).
 
 A fit minimises the log-space error of Eq. 5 over measured samples of the MERL
-grid (:class:`Samples`), with SciPy's trust-region least squares and an analytic
-Jacobian. The κ/γ log-curve control values are an affine function of the free
+grid (:class:`Samples`) by Levenberg-Marquardt with an analytic Jacobian and box
+bounds (:func:`levenberg_marquardt`). The κ/γ log-curve control values are an affine function of the free
 variables, ``ctrl = A p + b``, which covers the three models with one code path:
 
 * ``fit_full``: every control value free (3 lobes x 2 curves x 6 = 36, plus

@@ -1,0 +1,41 @@
+"""The negative log posterior of paper §4 (Eq. 18), term by term.
+
+    -log p(R, L | I) = likelihood (Eq. 19) + reflectance priors (Eq. 6, 12)
+                       + illumination priors (Eq. 13-16) + const
+
+This module holds the likelihood; the priors are in :mod:`mi_dsbrdf.priors`.
+Each term is a function returning (value, gradient) in float64, so that the
+inference loop adds them to the gradients Dr.Jit returns for the rendering.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Offset of the log (in units of the image's median observed value): keeps
+#: log finite for black pixels and bounds the weight of dark, noisy ones.
+LOG_OFFSET = 1e-3
+#: Width of the smoothed kink of |.| (in log units): |d| ~ sqrt(d^2 + s^2) - s.
+KINK = 1e-3
+
+
+def log_likelihood_terms(model, observed, mask, offset, scale=1.0):
+    """Eq. 19: a Laplacian likelihood on log pixel values,
+
+        -log p(I | R, L) = sum_{p, c in mask} rho(log(model + e) - log(observed + e)) / scale,
+        rho(d) = sqrt(d^2 + KINK^2) - KINK   (|d| with a smooth kink),
+
+    ``model``, ``observed``: (H, W, C) float arrays (observed saturated or
+    invalid pixels are excluded through ``mask`` (H, W) bool); ``offset``: e,
+    in image units (e.g. LOG_OFFSET times the median observed value).
+    Returns (value, d value / d model (H, W, C)); both finite for zero,
+    negative-rounded or huge model values.
+    """
+    m = np.asarray(model, dtype=np.float64)
+    o = np.asarray(observed, dtype=np.float64)
+    keep = np.asarray(mask, bool)[..., None]
+    mp = np.maximum(m, 0.0) + offset
+    d = np.where(keep, np.log(mp) - np.log(np.maximum(o, 0.0) + offset), 0.0)
+    r = np.sqrt(d * d + KINK * KINK)
+    value = float((r - KINK).sum()) / scale
+    grad = np.where(keep & (m >= 0), d / r / mp, 0.0) / scale
+    return value, grad
