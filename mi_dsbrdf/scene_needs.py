@@ -1,0 +1,106 @@
+"""What a scene needs — the one place that decides what inference leaves out.
+
+Given the loaded Mitsuba scene, the observed image and its mask, decide:
+
+* the light: an ``envmap`` (non-parametric illumination block) or a point /
+  directional emitter (direction + intensity by Powell's method, no envmap block);
+* the colour pass: none for a grey image (all channels equal within 0.1 %);
+* visibility rays: none for a convex object (a sphere, a convex mesh, a planar
+  shape), whose surface never shadows itself;
+* the lobes and bases of the reflectance model.
+
+Each decision comes with its reason, printed in the inference log. Errors on
+scenes that inference cannot handle are raised here, before any work.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .errors import MiDsbrdfError
+
+GREY_TOLERANCE = 1e-3
+
+
+class SceneError(MiDsbrdfError):
+    """A scene that inference cannot handle (no dsbrdf object, several lights, ...)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneNeeds:
+    light: str              # "envmap", "point" or "directional"
+    colour_pass: bool       # a second, colour pass after the grey one
+    visibility: bool        # trace shadow rays (non-convex object)
+    n_lobes: int
+    n_bases: int
+    reasons: tuple          # one line per decision, for the log
+
+    @property
+    def envmap_block(self) -> bool:
+        return self.light == "envmap"
+
+
+def light_kind(emitter) -> str:
+    import mitsuba as mi
+    name = emitter.class_name() if hasattr(emitter, "class_name") else str(emitter).split("[")[0]
+    flags = emitter.flags()
+    if emitter.is_environment() and "Environment" in name:
+        return "envmap"
+    if mi.has_flag(flags, mi.EmitterFlags.DeltaDirection):
+        return "directional"
+    if mi.has_flag(flags, mi.EmitterFlags.DeltaPosition):
+        return "point"
+    raise SceneError("the light must be an envmap, a point or a directional emitter; got %s" % name.strip())
+
+
+def is_convex(shape) -> tuple:
+    """(convex?, reason) for a Mitsuba shape."""
+    name = str(shape).split("[")[0].strip()
+    if name == "Sphere":
+        return True, "a sphere is convex"
+    if name in ("Rectangle", "Disk"):
+        return True, "a planar %s never shadows itself" % name.lower()
+    if shape.is_mesh():
+        import trimesh
+        import mitsuba as mi
+        params = mi.traverse(shape)
+        v = np.array(params["vertex_positions"], dtype=np.float64).reshape(-1, 3)
+        f = np.array(params["faces"], dtype=np.int64).reshape(-1, 3)
+        mesh = trimesh.Trimesh(v, f, process=True)
+        if mesh.is_convex:
+            return True, "the mesh is convex (trimesh)"
+        return False, "the mesh is not convex (trimesh): it can shadow itself"
+    return False, "%s: convexity unknown, assumed non-convex" % name
+
+
+def is_grey(image, mask=None, tol=GREY_TOLERANCE) -> bool:
+    """True when every masked pixel has equal channels within ``tol`` (relative)."""
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim != 3 or img.shape[2] < 3:
+        return True
+    px = img[mask] if mask is not None else img.reshape(-1, img.shape[2])
+    mean = px[:, :3].mean(axis=1, keepdims=True)
+    return bool(np.all(np.abs(px[:, :3] - mean) <= tol * np.maximum(mean, 1e-12)))
+
+
+def decide(scene, image, mask=None, n_lobes=3, n_bases=10) -> SceneNeeds:
+    """The needs of ``scene`` (a loaded mi.Scene) observed as ``image`` (H, W, C)."""
+    emitters = scene.emitters()
+    if len(emitters) != 1:
+        raise SceneError("inference needs exactly one light in the scene, found %d" % len(emitters))
+    objects = [s for s in scene.shapes() if "DSBRDF" in str(s.bsdf()).split("[")[0]]
+    if len(objects) != 1:
+        raise SceneError("inference needs exactly one object with a dsbrdf BSDF, found %d" % len(objects))
+    reasons = []
+    light = light_kind(emitters[0])
+    reasons.append("light: %s -> %s" % (light, "illumination-map block" if light == "envmap"
+                                       else "direction + intensity by Powell's method, no envmap block"))
+    grey = is_grey(image, mask)
+    reasons.append("colour pass: %s" % ("no (the image is grey)" if grey else "yes (the image has colour)"))
+    convex, why = is_convex(objects[0])
+    if light != "envmap" and convex:
+        why += "; a point light casts no other shadow on it"
+    reasons.append("visibility rays: %s (%s)" % ("no" if convex else "yes", why))
+    reasons.append("reflectance: %d lobes, %d bases" % (n_lobes, n_bases))
+    return SceneNeeds(light, not grey, not convex, n_lobes, n_bases, tuple(reasons))
