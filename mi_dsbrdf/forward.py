@@ -63,11 +63,16 @@ class TexelSum:
         if to_world is not None:
             d = d @ np.asarray(to_world, dtype=np.float64)[:3, :3].T
             d /= np.linalg.norm(d, axis=1, keepdims=True)
-        self.directions = d
-        self.solid_angles = texel_solid_angles(H, W).reshape(-1)
-        self.visibility = None
-        if visibility:
-            self.visibility = self._trace_visibility(scene)
+        self._scene, self._trace = scene, visibility
+        self.set_directions(d, texel_solid_angles(H, W).reshape(-1))
+
+    def set_directions(self, directions, solid_angles):
+        """Light from these world directions (T, 3) with these solid angles (T,)
+        instead of the map's texels: one direction with solid angle 1 makes the
+        sum a directional light whose 'radiance' is its irradiance."""
+        self.directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        self.solid_angles = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
+        self.visibility = self._trace_visibility(self._scene) if self._trace else None
 
     @property
     def n_pixels(self) -> int:

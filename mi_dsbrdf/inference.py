@@ -41,10 +41,12 @@ class Config:
     tol: float = 1e-3
     seed: int = 0
     block_iters: int = 40
-    w_gmm: float = 1e-3
-    w_hue: float = 1e-3
-    w_entropy: float = 1e-2
-    w_gradient: float = 1e-2
+    #: Laplacian scale b of Eq. 19 in log units: the expected |log error| of a pixel
+    likelihood_scale: float = 0.05
+    w_gmm: float = 1.0
+    w_hue: float = 1.0
+    w_entropy: float = 1.0
+    w_gradient: float = 1.0
 
 
 @dataclasses.dataclass
@@ -68,8 +70,8 @@ class Posterior:
         obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
         self.observed, self.keep = obs, keep
-        self.offset = LOG_OFFSET * float(np.median(obs[keep]))
-        self.scale = float(keep.sum() * 3)                    # likelihood as a mean over observed values
+        self.offset = LOG_OFFSET * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
+        self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
         k, R = model.basis.n_bases, model.basis.n_lobes
         props = {"type": "dsbrdf", "model": model.source, "psi": " ".join(["0"] * k)}
         self.bsdf = mi.load_dict(props)
@@ -209,3 +211,96 @@ def _reflectance_block(post, psi, logits, L, iters):
     res = minimize(fun, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters},
                    bounds=[(-50, 50)] * k + [(-20, 20)] * logits.size)
     return res.x[:k], res.x[k:].reshape(-1, 2)
+
+
+# --- point / directional light (paper §5: Powell's method) -----------------------------
+
+def direction_from_angles(theta, phi) -> np.ndarray:
+    """World direction (y up, the lat-long convention of :mod:`mi_dsbrdf.illumination`)."""
+    st = np.sin(theta)
+    return np.array([st * np.sin(phi), np.cos(theta), -st * np.cos(phi)])
+
+
+def angles_from_direction(d):
+    d = np.asarray(d, dtype=np.float64) / np.linalg.norm(d)
+    return float(np.arccos(np.clip(d[1], -1, 1))), float(np.arctan2(d[0], -d[2]))
+
+
+def _light_likelihood(post, theta, phi, log_intensity):
+    post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
+    image = post.ts.render(np.full((1, 3), np.exp(log_intensity)))
+    lik, _ = log_likelihood_terms(image[:, None, :], post.observed[:, None, :], post.keep[:, None],
+                                  post.offset, post.scale)
+    return lik
+
+
+def _light_block(post, theta, phi, log_intensity):
+    """Powell's method on (theta, phi, log intensity) with the reflectance fixed."""
+    from scipy.optimize import minimize as _minimize
+    res = _minimize(lambda v: _light_likelihood(post, *v), [theta, phi, log_intensity], method="Powell",
+                    options={"xtol": 1e-4, "ftol": 1e-7, "maxfev": 400})
+    return tuple(res.x)
+
+
+def _best_start(post, n=64):
+    """The best of ``n`` directions spread over the sphere (Fibonacci lattice), each
+    with the intensity that matches the image's median level."""
+    best = None
+    i = np.arange(n) + 0.5
+    thetas, phis = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
+    for th, ph in zip(thetas, phis):
+        post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
+        img = post.ts.render(np.ones((1, 3)))
+        lit = img.mean(axis=1)[post.keep]
+        if not np.any(lit > 0):
+            continue
+        ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
+        if not ratio > 0:
+            continue
+        log_i = float(np.log(ratio))
+        lik = _light_likelihood(post, th, ph, log_i)
+        if best is None or lik < best[0]:
+            best = (lik, th, ph, log_i)
+    if best is None:
+        raise ValueError("no light direction lights the observed pixels")
+    return best[1:]
+
+
+def recover_directional(texels: TexelSum, observed, mask, model, config=Config(), progress=None,
+                        known_light=None):
+    """MAP estimate for a directional light: returns (State-like dict, log rows).
+
+    The light is a direction (unit vector from the object towards the light)
+    and a non-negative intensity (irradiance, RGB-equal: the colour is the
+    material's), updated by Powell's method while the reflectance is fixed;
+    the reflectance block is the same as under an illumination map.
+    ``known_light`` = (direction, intensity) skips the light block.
+    """
+    cfg = config
+    post = Posterior(texels, observed, mask, model, cfg)
+    rng = np.random.default_rng(cfg.seed)
+    psi, logits = np.zeros(post.k), chroma_logits(rng.dirichlet(np.full(3, 5.0), post.R))
+    post.set_reflectance(psi, logits)
+    if known_light is None:
+        theta, phi, log_i = _best_start(post)
+    else:
+        theta, phi = angles_from_direction(known_light[0])
+        log_i = float(np.log(known_light[1]))
+    rows, prev, t0 = [], None, time.perf_counter()
+    for rnd in range(cfg.max_rounds):
+        post.set_reflectance(psi, logits)
+        if known_light is None:
+            theta, phi, log_i = _light_block(post, theta, phi, log_i)
+        L = np.full((1, 3), np.exp(log_i))
+        post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
+        psi, logits = _reflectance_block(post, psi, logits, L, cfg.block_iters)
+        total, _, _, lik = post.reflectance_terms(psi, logits, L)
+        rows.append({"pass": "directional", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
+                     "seconds": time.perf_counter() - t0})
+        if progress:
+            progress(rows[-1])
+        if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
+            break
+        prev = total
+    return {"psi": psi, "chromaticity": softmax_chroma(logits), "direction": direction_from_angles(theta, phi),
+            "intensity": float(np.exp(log_i))}, rows

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Offset of the log (in units of the image's median observed value): keeps
+#: Offset of the log (in units of the image's mean observed value): keeps
 #: log finite for black pixels and bounds the weight of dark, noisy ones.
 LOG_OFFSET = 1e-3
 #: Width of the smoothed kink of |.| (in log units): |d| ~ sqrt(d^2 + s^2) - s.
@@ -30,6 +30,8 @@ def log_likelihood_terms(model, observed, mask, offset, scale=1.0):
     Returns (value, d value / d model (H, W, C)); both finite for zero,
     negative-rounded or huge model values.
     """
+    if not offset > 0:
+        raise ValueError("the log offset must be positive, got %r" % (offset,))
     m = np.asarray(model, dtype=np.float64)
     o = np.asarray(observed, dtype=np.float64)
     keep = np.asarray(mask, bool)[..., None]
