@@ -180,3 +180,39 @@ def unseen_texels(transport, threshold=1e-6) -> np.ndarray:
 def texel_angle(map_size) -> float:
     """Angular spacing of texels (radians) at the equator of an (H, W) map."""
     return math.pi / map_size[0]
+
+
+def _forward_columns(partial, variables):
+    """Forward-mode derivatives of ``partial`` (a Color3f of P pixels) with respect
+    to every entry of every Float in ``variables``: a (P, 3, n) float64 array."""
+    import drjit as dr
+    cols = []
+    for var in variables:
+        n = dr.width(var)
+        for i in range(n):
+            e = np.zeros(n, dtype=np.float32)
+            e[i] = 1.0
+            dr.set_grad(var, type(var)(e))
+            cols.append(np.array(dr.forward_to(partial, flags=dr.ADFlag.ClearInput | dr.ADFlag.ClearInterior)).T)
+            dr.clear_grad(partial)
+            dr.clear_grad(var)
+    return np.stack(cols, axis=-1).astype(np.float64)
+
+
+def reflectance_jacobian(texels, illumination, params, keys):
+    """Pixel radiance (P, 3) and its Jacobian (P, 3, n) with respect to the BSDF
+    parameters ``keys`` of ``params`` (gradients enabled by the caller), by
+    forward-mode AD through the plugin, one chunk of texels at a time."""
+    import drjit as dr
+    import mitsuba as mi
+    L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
+    Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
+    image, jac = np.zeros((texels.n_pixels, 3)), None
+    for t0, t1 in texels._chunks():
+        si, wo, pix, tex = texels._pairs(t0, t1)
+        f = texels._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
+        partial = dr.block_sum(f, t1 - t0)
+        image += np.array(dr.detach(partial)).T
+        cols = _forward_columns(partial, [params[k] for k in keys])
+        jac = cols if jac is None else jac + cols
+    return image, jac

@@ -201,16 +201,69 @@ def _illumination_block(post, log_map, T, seen, bins, grey, iters):
 
 
 def _reflectance_block(post, psi, logits, L, iters):
-    k = psi.size
+    """Levenberg-Marquardt with iteratively reweighted residuals (IRLS).
 
-    def fun(v):
-        val, g_psi, g_z, _ = post.reflectance_terms(v[:k], v[k:].reshape(-1, 2), L)
-        return val, np.concatenate([g_psi, g_z.reshape(-1)])
+    The Laplacian likelihood sum rho(d_i)/b is minimised as a sequence of
+    weighted least-squares problems, weights w_i = rho'(d_i)/(d_i b), with the
+    image Jacobian from forward-mode AD; the GMM prior enters as the quadratic
+    of its most responsible component, the hue prior through its gradient.
+    Each step is accepted only if the full negative log posterior decreases.
+    """
+    from .forward import reflectance_jacobian
+    from .posterior import KINK
+    k, R = psi.size, logits.shape[0]
+    dr = post._dr
 
-    v0 = np.concatenate([psi, logits.reshape(-1)])
-    res = minimize(fun, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters},
-                   bounds=[(-50, 50)] * k + [(-20, 20)] * logits.size)
-    return res.x[:k], res.x[k:].reshape(-1, 2)
+    def total(p, z):
+        return post.reflectance_terms(p, z, L)[0]
+
+    cur = total(psi, logits)
+    lam = 1e-2
+    for _ in range(iters):
+        post.set_reflectance(psi, logits)
+        dr.enable_grad(post.params["psi"])
+        dr.enable_grad(post.params["chromaticity"])
+        post.params.update()
+        image, J = reflectance_jacobian(post.ts, L, post.params, ["psi", "chromaticity"])
+        dr.disable_grad(post.params["psi"])
+        dr.disable_grad(post.params["chromaticity"])
+        c = softmax_chroma(logits)
+        dc_dz = c[:, :, None] * (np.eye(3)[None, :, :2] - c[:, None, :2])           # (R, 3, 2)
+        Jz = np.einsum("pcrl,rlk->pcrk", J[:, :, k:].reshape(J.shape[0], 3, R, 3), dc_dz).reshape(J.shape[0], 3, -1)
+        J = np.concatenate([J[:, :, :k], Jz], axis=2)[post.keep].reshape(-1, k + 2 * R)
+        mp = np.maximum(image[post.keep], 0) + post.offset
+        d = (np.log(mp) - np.log(np.maximum(post.observed[post.keep], 0) + post.offset)).reshape(-1)
+        Jd = J / mp.reshape(-1, 1)
+        w = 1.0 / (np.sqrt(d * d + KINK * KINK) * post.scale)                      # IRLS weights
+        H = Jd.T @ (Jd * w[:, None])
+        g = Jd.T @ (w * d)
+        if post.model.gmm is not None:
+            gm = post.model.gmm
+            lc, _ = gm._component_logs(psi[None])
+            prec = gm._prec[int(np.argmax(lc[0]))]
+            H[:k, :k] += post.cfg.w_gmm * prec
+            g[:k] += post.cfg.w_gmm * gm.grad(psi)
+        if post.model.hue_prior is not None:
+            gh = post.cfg.w_hue * post.model.hue_prior.grad(c)
+            g[k:] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
+        improved = False
+        for _ in range(10):
+            step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-9), g)
+            p_new, z_new = psi + step[:k], logits + step[k:].reshape(R, 2)
+            new = total(p_new, z_new)
+            if np.isfinite(new) and new < cur:
+                improved = True
+                break
+            lam *= 10.0
+        if not improved:
+            break
+        gain = (cur - new) / max(abs(cur), 1e-300)
+        psi, logits, cur = p_new, z_new, new
+        lam = max(lam / 10.0, 1e-9)
+        if gain < 1e-6:
+            break
+    post.set_reflectance(psi, logits)
+    return psi, logits
 
 
 # --- point / directional light (paper §5: Powell's method) -----------------------------
@@ -266,20 +319,43 @@ def _best_start(post, n=64):
     return best[1:]
 
 
+def reflectance_starts(model) -> list:
+    """Starting coefficients: psi = 0 (the mean material) and the mean of every
+    GMM component (diffuse, shiny, in between): the likelihood has local minima,
+    and these starts cover the clusters of real materials."""
+    starts = [np.zeros(model.basis.n_bases)]
+    if model.gmm is not None:
+        starts += [m.copy() for m in model.gmm.means]
+    return starts
+
+
 def recover_directional(texels: TexelSum, observed, mask, model, config=Config(), progress=None,
                         known_light=None):
-    """MAP estimate for a directional light: returns (State-like dict, log rows).
+    """MAP estimate for a directional light: returns (result dict, log rows).
 
     The light is a direction (unit vector from the object towards the light)
     and a non-negative intensity (irradiance, RGB-equal: the colour is the
     material's), updated by Powell's method while the reflectance is fixed;
-    the reflectance block is the same as under an illumination map.
+    the reflectance block is the same as under an illumination map. Runs from
+    every start of :func:`reflectance_starts` and keeps the best posterior.
     ``known_light`` = (direction, intensity) skips the light block.
     """
     cfg = config
     post = Posterior(texels, observed, mask, model, cfg)
     rng = np.random.default_rng(cfg.seed)
-    psi, logits = np.zeros(post.k), chroma_logits(rng.dirichlet(np.full(3, 5.0), post.R))
+    logits0 = chroma_logits(rng.dirichlet(np.full(3, 5.0), post.R))
+    best, rows = None, []
+    for start, psi0 in enumerate(reflectance_starts(model)):
+        out = _directional_from(post, psi0, logits0.copy(), known_light, cfg, progress, start)
+        rows += out[-1]
+        if best is None or out[-1][-1]["neg_log_posterior"] < best[-1][-1]["neg_log_posterior"]:
+            best = out
+    psi, logits, theta, phi, log_i, _ = best
+    return {"psi": psi, "chromaticity": softmax_chroma(logits), "direction": direction_from_angles(theta, phi),
+            "intensity": float(np.exp(log_i)), "start": best[-1][-1]["start"]}, rows
+
+
+def _directional_from(post, psi, logits, known_light, cfg, progress, start):
     post.set_reflectance(psi, logits)
     if known_light is None:
         theta, phi, log_i = _best_start(post)
@@ -295,12 +371,11 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
         post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
         psi, logits = _reflectance_block(post, psi, logits, L, cfg.block_iters)
         total, _, _, lik = post.reflectance_terms(psi, logits, L)
-        rows.append({"pass": "directional", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
-                     "seconds": time.perf_counter() - t0})
+        rows.append({"pass": "directional", "start": start, "round": rnd, "neg_log_posterior": total,
+                     "likelihood": lik, "seconds": time.perf_counter() - t0})
         if progress:
             progress(rows[-1])
         if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
             break
         prev = total
-    return {"psi": psi, "chromaticity": softmax_chroma(logits), "direction": direction_from_angles(theta, phi),
-            "intensity": float(np.exp(log_i))}, rows
+    return psi, logits, theta, phi, log_i, rows
