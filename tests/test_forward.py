@@ -92,3 +92,30 @@ def test_visibility_of_a_non_convex_object_matches_monte_carlo():
     err_none = np.mean(np.abs(without.render(env)[sel] - r) / r)
     assert with_vis.visibility is not None and not with_vis.visibility.all()
     assert err_vis < 0.06 and err_vis < 0.5 * err_none, (err_vis, err_none)
+
+
+def test_forward_mode_jacobian_matches_finite_differences():
+    from mi_dsbrdf.forward import reflectance_jacobian
+    env = smooth_map(8, 16)
+    psi = " ".join(map(str, PSI))
+    s = scene({"type": "dsbrdf", "psi": psi, "chromaticity_0": "0.5 0.3 0.2"}, res=16)
+    ts = TexelSum(s, s.shapes()[0], env.shape[:2])
+    params = mi.traverse(ts.bsdf)
+    dr.enable_grad(params["psi"])
+    dr.enable_grad(params["chromaticity"])
+    params.update()
+    image, J = reflectance_jacobian(ts, env, params, ["psi", "chromaticity"])
+    assert J.shape == (ts.n_pixels, 3, 10 + 9)
+    np.testing.assert_allclose(image, ts.render(env), rtol=1e-5, atol=1e-7)
+    h = 1e-2
+    for i in (0, 4):
+        e = np.zeros(10)
+        e[i] = h
+        r = []
+        for sign in (1, -1):
+            s2 = scene({"type": "dsbrdf", "psi": " ".join(map(str, PSI + sign * e)), "chromaticity_0": "0.5 0.3 0.2"},
+                       res=16)
+            r.append(TexelSum(s2, s2.shapes()[0], env.shape[:2]).render(env))
+        np.testing.assert_allclose(J[:, :, i], (r[0] - r[1]) / (2 * h), rtol=2e-3, atol=1e-5 * np.abs(r[0]).max())
+    # chromaticity of lobe 0, red: the red channel is linear in it, the others do not depend on it
+    assert np.abs(J[:, 1:, 10]).max() == 0 and np.abs(J[:, 0, 10]).max() > 0
