@@ -30,6 +30,8 @@ from .forward import TexelSum, unseen_texels
 from .posterior import LOG_OFFSET, log_likelihood_terms
 from .priors import EntropyPrior, GradientPrior
 
+#: bound of the chromaticity variables (softmax logits): c >= ~e^-6 / 2
+CHROMA_LIMIT = 6.0
 #: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
 BLACK = -30.0
 
@@ -218,7 +220,7 @@ def _reflectance_block(post, psi, logits, L, iters):
         return post.reflectance_terms(p, z, L)[0]
 
     cur = total(psi, logits)
-    lam = 1e-2
+    lam = 1.0
     for _ in range(iters):
         post.set_reflectance(psi, logits)
         dr.enable_grad(post.params["psi"])
@@ -234,7 +236,10 @@ def _reflectance_block(post, psi, logits, L, iters):
         mp = np.maximum(image[post.keep], 0) + post.offset
         d = (np.log(mp) - np.log(np.maximum(post.observed[post.keep], 0) + post.offset)).reshape(-1)
         Jd = J / mp.reshape(-1, 1)
-        w = 1.0 / (np.sqrt(d * d + KINK * KINK) * post.scale)                      # IRLS weights
+        # IRLS weights of the Laplacian, graduated: while most residuals are large the
+        # kink is widened to their median (least squares far away, L1 near the optimum)
+        kink = max(KINK, float(np.median(np.abs(d))))
+        w = 1.0 / (np.sqrt(d * d + kink * kink) * post.scale)
         H = Jd.T @ (Jd * w[:, None])
         g = Jd.T @ (w * d)
         if post.model.gmm is not None:
@@ -249,7 +254,8 @@ def _reflectance_block(post, psi, logits, L, iters):
         improved = False
         for _ in range(10):
             step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-9), g)
-            p_new, z_new = psi + step[:k], logits + step[k:].reshape(R, 2)
+            # chromaticity variables stay within +-CHROMA_LIMIT: a saturated softmax has no gradient left
+            p_new, z_new = psi + step[:k], np.clip(logits + step[k:].reshape(R, 2), -CHROMA_LIMIT, CHROMA_LIMIT)
             new = total(p_new, z_new)
             if np.isfinite(new) and new < cur:
                 improved = True
