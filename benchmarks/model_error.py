@@ -163,7 +163,7 @@ def write_report(rows, names, med):
               "Caveats. The Cook-Torrance models are fitted by trust-region least squares on a coarse slice "
               "(every 6th theta_d, every 30th phi_d), from 3 starts (1 lobe) or 2 starts (3 lobes, one of them "
               "the 1-lobe fit); the extra lobes lower the error by more than 10 %% on only %d materials "
-              "(metals most), so the 3-lobe fits may be local optima. The full B-spline fits are local optima too, with a "
+              "(the sharp-specular ones: metals, phenolics, acrylics), so the 3-lobe fits may be local optima. The full B-spline fits are local optima too, with a "
               "curvature penalty: on the easiest materials the 16-variable basis refit ends below them. "
               "The bivariate table is the data averaged over phi_d, the best any (theta_h, theta_d) model can do."
               % gain, "",
