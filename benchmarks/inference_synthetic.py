@@ -57,8 +57,7 @@ def main():
         res, rows = inference.recover_directional(ts2, img, ts2.mask, model, cfg,
                                                   known_light=(d, 3.0) if known else None)
         m = Material.from_basis(model.basis, res["psi"], res["chromaticity"])
-        best = [r for r in rows if r["start"] == res["start"]][-1]          # the kept start's last round
-        mean_log = best["likelihood"] * cfg.likelihood_scale / (3 * ts2.mask.sum())
+        mean_log = rows[-1]["likelihood"] * cfg.likelihood_scale / (3 * ts2.mask.sum())
         brdf = np.abs(np.log(m.eval(th, td)) - np.log(truth)).max()
         ang = math.degrees(math.acos(min(1.0, float(res["direction"] @ d))))
         print("light %-7s  %5.1f s  re-render mean |log err| %.4f  BRDF max |log err| (theta_h 11-57 deg) %.3f  "

@@ -202,7 +202,7 @@ def _illumination_block(post, log_map, T, seen, bins, grey, iters):
     return unpack(res.x)
 
 
-def _reflectance_block(post, psi, logits, L, iters):
+def _reflectance_block(post, psi, logits, L, iters, fit_scale=False):
     """Levenberg-Marquardt with iteratively reweighted residuals (IRLS).
 
     The Laplacian likelihood sum rho(d_i)/b is minimised as a sequence of
@@ -210,15 +210,20 @@ def _reflectance_block(post, psi, logits, L, iters):
     image Jacobian from forward-mode AD; the GMM prior enters as the quadratic
     of its most responsible component, the hue prior through its gradient.
     Each step is accepted only if the full negative log posterior decreases.
+    With ``fit_scale`` the light's overall log scale s is a variable too (the
+    image is proportional to e^s): brightness then moves freely between the
+    light and the material, which the two otherwise trade off only slowly.
+    Returns (psi, logits) or, with ``fit_scale``, (psi, logits, scaled L).
     """
     from .forward import reflectance_jacobian
     from .posterior import KINK
     k, R = psi.size, logits.shape[0]
     dr = post._dr
 
-    def total(p, z):
-        return post.reflectance_terms(p, z, L)[0]
+    def total(p, z, sc=0.0):
+        return post.reflectance_terms(p, z, L * np.exp(sc))[0]
 
+    sc = 0.0
     cur = total(psi, logits)
     lam = 1.0
     for _ in range(iters):
@@ -226,13 +231,14 @@ def _reflectance_block(post, psi, logits, L, iters):
         dr.enable_grad(post.params["psi"])
         dr.enable_grad(post.params["chromaticity"])
         post.params.update()
-        image, J = reflectance_jacobian(post.ts, L, post.params, ["psi", "chromaticity"])
+        image, J = reflectance_jacobian(post.ts, L * np.exp(sc), post.params, ["psi", "chromaticity"])
         dr.disable_grad(post.params["psi"])
         dr.disable_grad(post.params["chromaticity"])
         c = softmax_chroma(logits)
         dc_dz = c[:, :, None] * (np.eye(3)[None, :, :2] - c[:, None, :2])           # (R, 3, 2)
         Jz = np.einsum("pcrl,rlk->pcrk", J[:, :, k:].reshape(J.shape[0], 3, R, 3), dc_dz).reshape(J.shape[0], 3, -1)
-        J = np.concatenate([J[:, :, :k], Jz], axis=2)[post.keep].reshape(-1, k + 2 * R)
+        J = np.concatenate([J[:, :, :k], Jz] + ([image[:, :, None]] if fit_scale else []), axis=2)
+        J = J[post.keep].reshape(-1, J.shape[2])
         mp = np.maximum(image[post.keep], 0) + post.offset
         d = (np.log(mp) - np.log(np.maximum(post.observed[post.keep], 0) + post.offset)).reshape(-1)
         Jd = J / mp.reshape(-1, 1)
@@ -250,13 +256,15 @@ def _reflectance_block(post, psi, logits, L, iters):
             g[:k] += post.cfg.w_gmm * gm.grad(psi)
         if post.model.hue_prior is not None:
             gh = post.cfg.w_hue * post.model.hue_prior.grad(c)
-            g[k:] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
+            g[k:k + 2 * R] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
         improved = False
         for _ in range(10):
             step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-9), g)
             # chromaticity variables stay within +-CHROMA_LIMIT: a saturated softmax has no gradient left
-            p_new, z_new = psi + step[:k], np.clip(logits + step[k:].reshape(R, 2), -CHROMA_LIMIT, CHROMA_LIMIT)
-            new = total(p_new, z_new)
+            p_new = psi + step[:k]
+            z_new = np.clip(logits + step[k:k + 2 * R].reshape(R, 2), -CHROMA_LIMIT, CHROMA_LIMIT)
+            sc_new = sc + (step[-1] if fit_scale else 0.0)
+            new = total(p_new, z_new, sc_new)
             if np.isfinite(new) and new < cur:
                 improved = True
                 break
@@ -264,12 +272,12 @@ def _reflectance_block(post, psi, logits, L, iters):
         if not improved:
             break
         gain = (cur - new) / max(abs(cur), 1e-300)
-        psi, logits, cur = p_new, z_new, new
+        psi, logits, sc, cur = p_new, z_new, sc_new, new
         lam = max(lam / 10.0, 1e-9)
         if gain < 1e-6:
             break
     post.set_reflectance(psi, logits)
-    return psi, logits
+    return (psi, logits, L * np.exp(sc)) if fit_scale else (psi, logits)
 
 
 # --- point / directional light (paper §5: Powell's method) -----------------------------
@@ -301,10 +309,11 @@ def _light_block(post, theta, phi, log_intensity):
     return tuple(res.x)
 
 
-def _best_start(post, n=64):
-    """The best of ``n`` directions spread over the sphere (Fibonacci lattice), each
-    with the intensity that matches the image's median level."""
-    best = None
+def _candidate_lights(post, n=64, keep=6):
+    """The ``keep`` best of ``n`` directions spread over the sphere (Fibonacci
+    lattice), each with the intensity that matches the image's median level under
+    the current reflectance: [(likelihood, theta, phi, log intensity), ...]."""
+    found = []
     i = np.arange(n) + 0.5
     thetas, phis = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
     for th, ph in zip(thetas, phis):
@@ -317,12 +326,23 @@ def _best_start(post, n=64):
         if not ratio > 0:
             continue
         log_i = float(np.log(ratio))
-        lik = _light_likelihood(post, th, ph, log_i)
-        if best is None or lik < best[0]:
-            best = (lik, th, ph, log_i)
-    if best is None:
+        found.append((_light_likelihood(post, th, ph, log_i), th, ph % (2 * np.pi), log_i))
+    if not found:
         raise ValueError("no light direction lights the observed pixels")
-    return best[1:]
+    return sorted(found)[:keep]
+
+
+def _highlight_lights(post):
+    """Directions the brightest observed pixel suggests: its normal (the light of a
+    matte object) and the mirror of the view direction about it (the light of a
+    glossy one), as [(theta, phi), ...]."""
+    lum = np.where(post.keep, post.observed.mean(axis=1), -np.inf)
+    i = int(np.argmax(lum))
+    si = post.ts.si
+    n = np.array(si.n)[:, i].astype(np.float64)
+    v = np.array(si.to_world(si.wi))[:, i].astype(np.float64)
+    mirror = 2 * (n @ v) * n - v
+    return [angles_from_direction(n), angles_from_direction(mirror)]
 
 
 def reflectance_starts(model) -> list:
@@ -341,47 +361,72 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
 
     The light is a direction (unit vector from the object towards the light)
     and a non-negative intensity (irradiance, RGB-equal: the colour is the
-    material's), updated by Powell's method while the reflectance is fixed;
-    the reflectance block is the same as under an illumination map. Runs from
-    every start of :func:`reflectance_starts` and keeps the best posterior.
-    ``known_light`` = (direction, intensity) skips the light block.
+    material's). A wrong reflectance biases the light and the other way round,
+    so the search starts globally: the best few of 64 directions under the mean
+    material each get a short reflectance fit and a Powell refinement, and the
+    best posterior among them starts the alternation (Powell's method for the
+    light with the reflectance fixed, the reflectance block with the light
+    fixed) until the posterior stops improving. ``known_light`` =
+    (direction, intensity) skips the light search and block.
     """
     cfg = config
     post = Posterior(texels, observed, mask, model, cfg)
     rng = np.random.default_rng(cfg.seed)
-    logits0 = chroma_logits(rng.dirichlet(np.full(3, 5.0), post.R))
-    best, rows = None, []
-    for start, psi0 in enumerate(reflectance_starts(model)):
-        out = _directional_from(post, psi0, logits0.copy(), known_light, cfg, progress, start)
-        rows += out[-1]
-        if best is None or out[-1][-1]["neg_log_posterior"] < best[-1][-1]["neg_log_posterior"]:
-            best = out
-    psi, logits, theta, phi, log_i, _ = best
-    return {"psi": psi, "chromaticity": softmax_chroma(logits), "direction": direction_from_angles(theta, phi),
-            "intensity": float(np.exp(log_i)), "start": best[-1][-1]["start"]}, rows
-
-
-def _directional_from(post, psi, logits, known_light, cfg, progress, start):
-    post.set_reflectance(psi, logits)
+    logits = chroma_logits(rng.dirichlet(np.full(3, 5.0), post.R))
+    psi = np.zeros(post.k)
+    t0 = time.perf_counter()
+    rows = []
     if known_light is None:
-        theta, phi, log_i = _best_start(post)
+        post.set_reflectance(psi, logits)
+        best = None
+        cands = [c[1:] for c in _candidate_lights(post)]
+        for th, ph in _highlight_lights(post):
+            post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
+            lit = post.ts.render(np.ones((1, 3))).mean(axis=1)[post.keep]
+            ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
+            cands.append((th, ph, float(np.log(max(ratio, 1e-30)))))
+        for th, ph, li in cands:
+            post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
+            p, z, Ls = _reflectance_block(post, psi, logits, np.full((1, 3), np.exp(li)),
+                                          max(cfg.block_iters // 4, 5), fit_scale=True)
+            li = float(np.log(Ls[0, 0]))
+            post.set_reflectance(p, z)
+            th, ph, li = _light_block(post, th, ph, li)
+            post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
+            value = post.reflectance_terms(p, z, np.full((1, 3), np.exp(li)))[0]
+            rows.append({"pass": "light search", "round": len(rows), "neg_log_posterior": value,
+                         "seconds": time.perf_counter() - t0})
+            if best is None or value < best[0]:
+                best = (value, p, z, th, ph, li)
+        _, psi, logits, theta, phi, log_i = best
     else:
         theta, phi = angles_from_direction(known_light[0])
         log_i = float(np.log(known_light[1]))
-    rows, prev, t0 = [], None, time.perf_counter()
+    prev = None
     for rnd in range(cfg.max_rounds):
         post.set_reflectance(psi, logits)
         if known_light is None:
             theta, phi, log_i = _light_block(post, theta, phi, log_i)
         L = np.full((1, 3), np.exp(log_i))
         post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
-        psi, logits = _reflectance_block(post, psi, logits, L, cfg.block_iters)
+        if rnd == 0:
+            # the reflectance block from every start (psi found so far, the mean, GMM means)
+            cands = [_reflectance_block(post, p0, logits, L, cfg.block_iters, fit_scale=known_light is None)
+                     for p0 in [psi] + reflectance_starts(model)]
+            cands = [c if len(c) == 3 else (c[0], c[1], L) for c in cands]
+            psi, logits, L = min(cands, key=lambda c: post.reflectance_terms(c[0], c[1], c[2])[0])
+        elif known_light is None:
+            psi, logits, L = _reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True)
+        else:
+            psi, logits = _reflectance_block(post, psi, logits, L, cfg.block_iters)
+        log_i = float(np.log(L[0, 0]))
         total, _, _, lik = post.reflectance_terms(psi, logits, L)
-        rows.append({"pass": "directional", "start": start, "round": rnd, "neg_log_posterior": total,
-                     "likelihood": lik, "seconds": time.perf_counter() - t0})
+        rows.append({"pass": "directional", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
+                     "seconds": time.perf_counter() - t0})
         if progress:
             progress(rows[-1])
         if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
             break
         prev = total
-    return psi, logits, theta, phi, log_i, rows
+    return {"psi": psi, "chromaticity": softmax_chroma(logits), "direction": direction_from_angles(theta, phi),
+            "intensity": float(np.exp(log_i))}, rows
