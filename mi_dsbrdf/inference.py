@@ -202,7 +202,7 @@ def _illumination_block(post, log_map, T, seen, bins, grey, iters):
     return unpack(res.x)
 
 
-def _reflectance_block(post, psi, logits, L, iters, fit_scale=False):
+def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None):
     """Levenberg-Marquardt with iteratively reweighted residuals (IRLS).
 
     The Laplacian likelihood sum rho(d_i)/b is minimised as a sequence of
@@ -213,14 +213,25 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False):
     With ``fit_scale`` the light's overall log scale s is a variable too (the
     image is proportional to e^s): brightness then moves freely between the
     light and the material, which the two otherwise trade off only slowly.
-    Returns (psi, logits) or, with ``fit_scale``, (psi, logits, scaled L).
+    With ``direction`` = (theta, phi) of a directional light, the direction is
+    refined jointly too (its two Jacobian columns by central differences), which
+    resolves the light/reflectance coupling that alternation resolves slowly.
+    Returns (psi, logits), or with ``fit_scale`` (psi, logits, scaled L), or with
+    ``direction`` also (theta, phi).
     """
     from .forward import reflectance_jacobian
     from .posterior import KINK
     k, R = psi.size, logits.shape[0]
     dr = post._dr
 
-    def total(p, z, sc=0.0):
+    ang = None if direction is None else np.array(direction, dtype=np.float64)
+
+    def aim(a):
+        if a is not None:
+            post.ts.set_directions(direction_from_angles(*a)[None], [1.0])
+
+    def total(p, z, sc=0.0, a=None):
+        aim(a)
         return post.reflectance_terms(p, z, L * np.exp(sc))[0]
 
     sc = 0.0
@@ -231,13 +242,22 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False):
         dr.enable_grad(post.params["psi"])
         dr.enable_grad(post.params["chromaticity"])
         post.params.update()
+        aim(ang)
         image, J = reflectance_jacobian(post.ts, L * np.exp(sc), post.params, ["psi", "chromaticity"])
         dr.disable_grad(post.params["psi"])
         dr.disable_grad(post.params["chromaticity"])
         c = softmax_chroma(logits)
         dc_dz = c[:, :, None] * (np.eye(3)[None, :, :2] - c[:, None, :2])           # (R, 3, 2)
         Jz = np.einsum("pcrl,rlk->pcrk", J[:, :, k:].reshape(J.shape[0], 3, R, 3), dc_dz).reshape(J.shape[0], 3, -1)
-        J = np.concatenate([J[:, :, :k], Jz] + ([image[:, :, None]] if fit_scale else []), axis=2)
+        extra = [image[:, :, None]] if fit_scale else []
+        if ang is not None:
+            for j in range(2):
+                e = np.zeros(2)
+                e[j] = 1e-3
+                hi, lo = [(aim(ang + sgn * e), post.ts.render(L * np.exp(sc)))[1] for sgn in (1, -1)]
+                extra.append(((hi - lo) / 2e-3)[:, :, None])
+            aim(ang)
+        J = np.concatenate([J[:, :, :k], Jz] + extra, axis=2)
         J = J[post.keep].reshape(-1, J.shape[2])
         mp = np.maximum(image[post.keep], 0) + post.offset
         d = (np.log(mp) - np.log(np.maximum(post.observed[post.keep], 0) + post.offset)).reshape(-1)
@@ -263,8 +283,9 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False):
             # chromaticity variables stay within +-CHROMA_LIMIT: a saturated softmax has no gradient left
             p_new = psi + step[:k]
             z_new = np.clip(logits + step[k:k + 2 * R].reshape(R, 2), -CHROMA_LIMIT, CHROMA_LIMIT)
-            sc_new = sc + (step[-1] if fit_scale else 0.0)
-            new = total(p_new, z_new, sc_new)
+            sc_new = sc + (step[k + 2 * R] if fit_scale else 0.0)
+            ang_new = None if ang is None else ang + step[-2:]
+            new = total(p_new, z_new, sc_new, ang_new)
             if np.isfinite(new) and new < cur:
                 improved = True
                 break
@@ -272,12 +293,14 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False):
         if not improved:
             break
         gain = (cur - new) / max(abs(cur), 1e-300)
-        psi, logits, sc, cur = p_new, z_new, sc_new, new
+        psi, logits, sc, ang, cur = p_new, z_new, sc_new, ang_new, new
         lam = max(lam / 10.0, 1e-9)
         if gain < 1e-6:
             break
     post.set_reflectance(psi, logits)
-    return (psi, logits, L * np.exp(sc)) if fit_scale else (psi, logits)
+    aim(ang)
+    out = (psi, logits, L * np.exp(sc)) if fit_scale else (psi, logits)
+    return out + (tuple(ang),) if ang is not None else out
 
 
 # --- point / directional light (paper §5: Powell's method) -----------------------------
@@ -416,7 +439,8 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
             cands = [c if len(c) == 3 else (c[0], c[1], L) for c in cands]
             psi, logits, L = min(cands, key=lambda c: post.reflectance_terms(c[0], c[1], c[2])[0])
         elif known_light is None:
-            psi, logits, L = _reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True)
+            psi, logits, L, (theta, phi) = _reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True,
+                                                              direction=(theta, phi))
         else:
             psi, logits = _reflectance_block(post, psi, logits, L, cfg.block_iters)
         log_i = float(np.log(L[0, 0]))
