@@ -58,6 +58,16 @@ def cmd_build_model(args):
               len(a["gmm_weights"]), str(a["gmm_covariance_type"]), float(a["hue_kappa"]), out, info["seconds"]))
 
 
+def cmd_recover(args):
+    from .pipeline import recover_files
+    h, w = (int(v) for v in args.map_size.lower().split("x"))
+    log = recover_files(args.scene, args.image, args.out, mask_file=args.mask, force=args.force,
+                        map_size=(h, w), rounds=args.rounds, iters=args.iters)
+    for line in log["needs"]:
+        print("  " + line)
+    print("recovered in %.1f s -> %s" % (log["seconds"], args.out))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="mi-dsbrdf", description=__doc__)
     ap.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_rgb)")
@@ -89,6 +99,17 @@ def main(argv=None):
                    help="reuse the full per-material fits stored in this model file")
     p.add_argument("--force", action="store_true", help="replace an existing model file")
     p.set_defaults(func=cmd_build_model)
+
+    p = sub.add_parser("recover", help="recover reflectance and illumination from one image")
+    p.add_argument("--scene", required=True, help="Mitsuba scene XML (camera, object with a dsbrdf BSDF, light)")
+    p.add_argument("--image", required=True, help="observed HDR image (EXR/HDR), film-sized")
+    p.add_argument("--mask", default=None, help="optional mask image (white = use)")
+    p.add_argument("--out", required=True, help="result directory")
+    p.add_argument("--map-size", default="16x32", help="illumination map HxW (default 16x32)")
+    p.add_argument("--rounds", type=int, default=4, help="rounds of alternating blocks per pass")
+    p.add_argument("--iters", type=int, default=40, help="iterations per block")
+    p.add_argument("--force", action="store_true", help="write into an existing non-empty directory")
+    p.set_defaults(func=cmd_recover)
 
     args = ap.parse_args(argv)
     try:
