@@ -37,6 +37,11 @@ N_LOBES = 3
 #: unneeded lobe fade out without an unbounded log.
 LOG_KAPPA_BOUNDS = (-9.0, LOG_KAPPA_MAX)
 LOG_GAMMA_BOUNDS = (math.log(0.2), LOG_GAMMA_MAX - 1.0)
+#: Offset of the log in the fit objective, log(FIT_OFFSET + rho cos theta_i):
+#: Eq. 5's offset of 1 makes a diffuse floor of 0.05/sr nearly free, so fits
+#: would spend every lobe on the peak and drop the diffuse colour of plastics
+#: and paints; 0.01 weighs it (errors are still reported with Eq. 5).
+FIT_OFFSET = 0.01
 #: Weight of the curvature penalty (second differences of control values).
 SMOOTHNESS = 0.02
 #: Constant-curve starts (gamma per lobe, kappa as fractions of the peak's log).
@@ -114,7 +119,7 @@ class _Problem:
         self.B = spline_matrix(samples.theta_d, knots)                      # (N, 6)
         self.lch = log_cos_h(np.cos(samples.theta_h), np.sin(samples.theta_h) ** 2)
         self.c = samples.cos_i[:, None]
-        self.y = log_brdf(samples.values, samples.cos_i)                    # (N, 3)
+        self.y = np.log(FIT_OFFSET + samples.values * self.c)               # (N, 3)
         self.scale = 1.0 / math.sqrt(self.y.size)                           # residuals -> RMSE
         self.R = n_lobes
         self.knots = knots
@@ -140,10 +145,10 @@ class _Problem:
         L, dL_da, dL_dg = self.lobes(ctrl)
         C = softmax_chroma(logits)                             # (R, 3)
         rho = L @ C                                            # (N, 3)
-        res = (np.log1p(rho * self.c) - self.y) * self.scale
+        res = (np.log(FIT_OFFSET + rho * self.c) - self.y) * self.scale
         if not jac:
             return res.reshape(-1), None, None
-        w = self.c / (1.0 + rho * self.c) * self.scale         # d res / d rho, (N, 3)
+        w = self.c / (FIT_OFFSET + rho * self.c) * self.scale  # d res / d rho, (N, 3)
         N, R = L.shape
         # d rho_l / d ctrl[r, curve, j] = C[r, l] dL_r/d(curve) B_j
         F = np.stack([dL_da, dL_dg], axis=2)                                # (N, R, 2, 6)
