@@ -12,23 +12,19 @@ import argparse
 import math
 import time
 
-import mitsuba as mi
 import numpy as np
 
 import mi_dsbrdf  # noqa: F401
 from mi_dsbrdf import inference, model_data
 from mi_dsbrdf.dsbrdf import Material
 from mi_dsbrdf.forward import TexelSum
+from mi_dsbrdf.scenes import sphere_scene
 
 RES = 24
 
 
 def sphere(bsdf):
-    return mi.load_dict({"type": "scene", "sensor": {
-        "type": "perspective", "fov": 30,
-        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
-        "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}}},
-        "object": {"type": "sphere", "bsdf": bsdf}})
+    return sphere_scene(bsdf, RES)
 
 
 def main():

@@ -6,13 +6,7 @@ import os
 import sys
 
 from .errors import MiDsbrdfError
-
-
-def _prepare_out(path, force):
-    if os.path.exists(path) and os.listdir(path) and not force:
-        raise SystemExit("mi-dsbrdf: output directory %s exists and is not empty; "
-                         "pass --force to write into it" % path)
-    os.makedirs(path, exist_ok=True)
+from .pipeline import prepare_out
 
 
 def _setup(variant):
@@ -26,7 +20,7 @@ def cmd_render(args):
     from .render import render_to_files
     from .scenes import scene_path
     scene = scene_path(args.scene)
-    _prepare_out(args.out, args.force)
+    prepare_out(args.out, args.force)
     stem = os.path.join(args.out, os.path.splitext(os.path.basename(args.scene))[0])
     params = dict(p.split("=", 1) for p in args.param)
     r = render_to_files(scene, stem, spp=args.spp, **params)
@@ -36,7 +30,7 @@ def cmd_render(args):
 def cmd_demo(args):
     from .render import render_to_files
     from .scenes import SCENES, scene_path
-    _prepare_out(args.out, args.force)
+    prepare_out(args.out, args.force)
     for name in SCENES:
         r = render_to_files(scene_path(name), os.path.join(args.out, name), spp=args.spp)
         print("rendered %-20s in %6.2f s -> %s" % (name, r["seconds"], r["png"]))

@@ -1,8 +1,10 @@
 """Fitting DSBRDF materials to measured BRDFs (paper §3.1-3.2).
 
-A fit minimises the log-space error of Eq. 5 over measured samples of the MERL
-grid (:class:`Samples`) by Levenberg-Marquardt with an analytic Jacobian and box
-bounds (:func:`levenberg_marquardt`). The κ/γ log-curve control values are an affine function of the free
+A fit minimises a log-space error like Eq. 5 but with a smaller offset,
+log(FIT_OFFSET + rho cos theta_i) (see :data:`FIT_OFFSET`), over measured samples
+of the MERL grid (:class:`Samples`) by Levenberg-Marquardt with an analytic
+Jacobian and box bounds (:func:`levenberg_marquardt`); errors are reported with
+Eq. 5. The κ/γ log-curve control values are an affine function of the free
 variables, ``ctrl = A p + b``, which covers the three models with one code path:
 
 * ``fit_full``: every control value free (3 lobes x 2 curves x 6 = 36, plus
@@ -29,7 +31,7 @@ from .angles import from_half_diff, log_cos_h
 from .curves import DEFAULT_KNOTS, N_CONTROL, spline_matrix
 from .dsbrdf import LOG_GAMMA_MAX, LOG_KAPPA_MAX, Material, clamp_controls
 from .measured import N_PHI_D, N_THETA_D, N_THETA_H, grid_angles
-from .metrics import log_brdf, log_rmse
+from .metrics import log_rmse
 
 N_LOBES = 3
 #: Bounds of fitted log kappa / log gamma control values. gamma >= 0.2 keeps a
@@ -113,7 +115,8 @@ def _samples(ih, jd, kp, values, name) -> Samples:
 # --- the least-squares problem -----------------------------------------------------
 
 class _Problem:
-    """Residuals and Jacobian of Eq. 5 for control values ctrl = A p + b."""
+    """Residuals and Jacobian of the fit error (Eq. 5 with offset FIT_OFFSET) for
+    control values ctrl = A p + b."""
 
     def __init__(self, samples: Samples, n_lobes, knots=DEFAULT_KNOTS):
         self.B = spline_matrix(samples.theta_d, knots)                      # (N, 6)
@@ -325,7 +328,7 @@ def fit_constant(samples: Samples, gamma, kappa, z0, max_iter=25):
 
 
 def fit_full(samples: Samples, name=None, smoothness=SMOOTHNESS, max_iter=80) -> Fit:
-    """The colour-separated 3-lobe B-spline DSBRDF (42 variables) minimising Eq. 5,
+    """The colour-separated 3-lobe B-spline DSBRDF (42 variables) minimising the fit error,
     from the best of the constant-curve starts :data:`STARTS`."""
     problem = _Problem(samples, N_LOBES)
     lum = samples.values.mean(axis=1)
@@ -350,7 +353,7 @@ def fit_full(samples: Samples, name=None, smoothness=SMOOTHNESS, max_iter=80) ->
 
 def fit_basis(samples: Samples, basis, psi0=None, chroma0=None, name=None, max_iter=100) -> Fit:
     """The colour-separated basis model: k coefficients psi + 2 chromaticity
-    variables per lobe, minimising Eq. 5 (starting at psi0, default 0)."""
+    variables per lobe, minimising the fit error (starting at psi0, default 0)."""
     problem = _Problem(samples, basis.n_lobes, basis.knots)
     A = basis.bases.reshape(basis.n_bases, -1).T
     psi0 = np.zeros(basis.n_bases) if psi0 is None else np.asarray(psi0, dtype=np.float64)

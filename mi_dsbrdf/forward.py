@@ -18,8 +18,6 @@ With the reflectance fixed, the image is linear in L: I = T L, and
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .illumination import latlong_directions, texel_solid_angles
@@ -110,7 +108,7 @@ class TexelSum:
             dr.eval()
         return vis
 
-    def _weights(self, si, wo, pix, tex, t0, t1):
+    def _weights(self, si, wo, tex, t0, t1):
         """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f."""
         import drjit as dr
         import mitsuba as mi
@@ -129,8 +127,8 @@ class TexelSum:
         out = np.zeros((self.n_pixels, self.n_texels, 3), dtype=np.float32)
         with dr.suspend_grad():
             for t0, t1 in self._chunks():
-                si, wo, pix, tex = self._pairs(t0, t1)
-                f = self._weights(si, wo, pix, tex, t0, t1)
+                si, wo, _, tex = self._pairs(t0, t1)
+                f = self._weights(si, wo, tex, t0, t1)
                 out[:, t0:t1] = np.array(f).T.reshape(self.n_pixels, t1 - t0, 3)
         return out
 
@@ -138,6 +136,18 @@ class TexelSum:
         """(P, 3) float64 pixel radiance for an (H, W, 3) map (no gradients)."""
         L = np.asarray(illumination, dtype=np.float64).reshape(-1, 3)
         return np.einsum("ptc,tc->pc", self.transport(), L)
+
+    def _radiance_chunks(self, illumination):
+        """Yield (P,) Color3f radiance from each chunk of texels under
+        ``illumination`` (T, 3), with whatever AD graph the BSDF parameters carry."""
+        import drjit as dr
+        import mitsuba as mi
+        L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
+        Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
+        for t0, t1 in self._chunks():
+            si, wo, _, tex = self._pairs(t0, t1)
+            f = self._weights(si, wo, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
+            yield dr.block_sum(f, t1 - t0)                   # (P,) radiance from these texels
 
     def reflectance_gradient(self, illumination, grad_pixels, params, keys):
         """Pixel radiance and the gradient of sum(grad_pixels * I) w.r.t. the
@@ -150,21 +160,28 @@ class TexelSum:
         """
         import drjit as dr
         import mitsuba as mi
-        L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
-        Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
         G = mi.Color3f(*(mi.Float(np.asarray(grad_pixels, dtype=np.float32)[:, c]) for c in range(3)))
         image = np.zeros((self.n_pixels, 3))
         grads = {k: 0.0 for k in keys}
-        for t0, t1 in self._chunks():
-            si, wo, pix, tex = self._pairs(t0, t1)
-            f = self._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
-            partial = dr.block_sum(f, t1 - t0)                  # (P,) radiance from these texels
+        for partial in self._radiance_chunks(illumination):
             image += np.array(dr.detach(partial)).T
             dr.backward_from(dr.sum(dr.sum(partial * G), axis=None))
             for k in keys:
                 grads[k] = grads[k] + np.array(dr.grad(params[k]), dtype=np.float64)
                 dr.clear_grad(params[k])
         return image, grads
+
+    def reflectance_jacobian(self, illumination, params, keys):
+        """Pixel radiance (P, 3) and its Jacobian (P, 3, n) with respect to the BSDF
+        parameters ``keys`` of ``params`` (gradients enabled by the caller), by
+        forward-mode AD through the plugin, one chunk of texels at a time."""
+        import drjit as dr
+        image, jac = np.zeros((self.n_pixels, 3)), None
+        for partial in self._radiance_chunks(illumination):
+            image += np.array(dr.detach(partial)).T
+            cols = _forward_columns(partial, [params[k] for k in keys])
+            jac = cols if jac is None else jac + cols
+        return image, jac
 
 
 def unseen_texels(transport, threshold=1e-6) -> np.ndarray:
@@ -175,11 +192,6 @@ def unseen_texels(transport, threshold=1e-6) -> np.ndarray:
     """
     peak = transport.max(axis=(0, 2))
     return peak <= threshold * max(float(peak.max()), 1e-30)
-
-
-def texel_angle(map_size) -> float:
-    """Angular spacing of texels (radians) at the equator of an (H, W) map."""
-    return math.pi / map_size[0]
 
 
 def _forward_columns(partial, variables):
@@ -198,21 +210,3 @@ def _forward_columns(partial, variables):
             dr.clear_grad(var)
     return np.stack(cols, axis=-1).astype(np.float64)
 
-
-def reflectance_jacobian(texels, illumination, params, keys):
-    """Pixel radiance (P, 3) and its Jacobian (P, 3, n) with respect to the BSDF
-    parameters ``keys`` of ``params`` (gradients enabled by the caller), by
-    forward-mode AD through the plugin, one chunk of texels at a time."""
-    import drjit as dr
-    import mitsuba as mi
-    L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
-    Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
-    image, jac = np.zeros((texels.n_pixels, 3)), None
-    for t0, t1 in texels._chunks():
-        si, wo, pix, tex = texels._pairs(t0, t1)
-        f = texels._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
-        partial = dr.block_sum(f, t1 - t0)
-        image += np.array(dr.detach(partial)).T
-        cols = _forward_columns(partial, [params[k] for k in keys])
-        jac = cols if jac is None else jac + cols
-    return image, jac

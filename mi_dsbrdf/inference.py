@@ -92,32 +92,18 @@ class Posterior:
         self.params.update()
 
     def reflectance_terms(self, psi, logits, L):
-        """(value, d/d psi, d/d logits) of likelihood + GMM + hue priors at fixed L."""
-        dr = self._dr
+        """(value, likelihood) of likelihood + GMM + hue priors at fixed L (no gradients:
+        the reflectance block takes its derivatives from :meth:`TexelSum.reflectance_jacobian`)."""
         self.set_reflectance(psi, logits)
-        dr.enable_grad(self.params["psi"])
-        dr.enable_grad(self.params["chromaticity"])
-        self.params.update()
-        # first the image (no gradients), then the likelihood's gradient as the adjoint
         image = self.ts.render(L)
-        lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
-                                          self.offset, self.scale)
-        _, grads = self.ts.reflectance_gradient(L, g_img[:, 0, :], self.params, ["psi", "chromaticity"])
-        dr.disable_grad(self.params["psi"])
-        dr.disable_grad(self.params["chromaticity"])
-        g_psi = grads["psi"]
-        g_c = grads["chromaticity"].reshape(self.R, 3)
+        lik, _ = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
+                                      self.offset, self.scale)
         value = lik
         if self.model.gmm is not None:
             value += self.cfg.w_gmm * self.model.gmm.nll(psi)
-            g_psi = g_psi + self.cfg.w_gmm * self.model.gmm.grad(psi)
-        c = softmax_chroma(logits)
         if self.model.hue_prior is not None:
-            value += self.cfg.w_hue * self.model.hue_prior.nll(c)
-            g_c = g_c + self.cfg.w_hue * self.model.hue_prior.grad(c)
-        # softmax chain rule: dc[r, l]/dz[r, k] = c[r, l](delta_lk - c[r, k])
-        g_z = np.einsum("rl,rlk->rk", g_c, c[:, :, None] * (np.eye(3)[None, :, :2] - c[:, None, :2]))
-        return value, g_psi, g_z, lik
+            value += self.cfg.w_hue * self.model.hue_prior.nll(softmax_chroma(logits))
+        return value, lik
 
     # --- illumination ------------------------------------------------------------
     def illumination_terms(self, log_map, T, seen, bins):
@@ -133,7 +119,7 @@ class Posterior:
         return lik + e + s, g + ge + gs, lik
 
 
-def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=True, progress=None, log=None):
+def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=True, progress=None):
     """MAP estimate for an envmap scene. Returns (State, log rows)."""
     cfg = config
     post = Posterior(texels, observed, mask, model, cfg)
@@ -162,7 +148,7 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
             L = np.where(seen[..., None], np.exp(state.log_map), 0.0)
             # reflectance block
             state.psi, state.logits = _reflectance_block(post, state.psi, state.logits, L, cfg.block_iters)
-            value_r, _, _, lik = post.reflectance_terms(state.psi, state.logits, L)
+            value_r, lik = post.reflectance_terms(state.psi, state.logits, L)
             value_i, _, _ = post.illumination_terms(state.log_map, texels.transport(), seen, bins)
             total = value_r + value_i - lik
             rows.append({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik,
@@ -172,8 +158,7 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
             if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
                 break
             prev = total
-    seen_map = seen
-    state.log_map = np.where(seen_map[..., None], state.log_map, BLACK)
+    state.log_map = np.where(seen[..., None], state.log_map, BLACK)
     return state, rows
 
 
@@ -219,7 +204,6 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
     Returns (psi, logits), or with ``fit_scale`` (psi, logits, scaled L), or with
     ``direction`` also (theta, phi).
     """
-    from .forward import reflectance_jacobian
     from .posterior import KINK
     k, R = psi.size, logits.shape[0]
     dr = post._dr
@@ -243,7 +227,7 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
         dr.enable_grad(post.params["chromaticity"])
         post.params.update()
         aim(ang)
-        image, J = reflectance_jacobian(post.ts, L * np.exp(sc), post.params, ["psi", "chromaticity"])
+        image, J = post.ts.reflectance_jacobian(L * np.exp(sc), post.params, ["psi", "chromaticity"])
         dr.disable_grad(post.params["psi"])
         dr.disable_grad(post.params["chromaticity"])
         c = softmax_chroma(logits)
@@ -326,8 +310,7 @@ def _light_likelihood(post, theta, phi, log_intensity):
 
 def _light_block(post, theta, phi, log_intensity):
     """Powell's method on (theta, phi, log intensity) with the reflectance fixed."""
-    from scipy.optimize import minimize as _minimize
-    res = _minimize(lambda v: _light_likelihood(post, *v), [theta, phi, log_intensity], method="Powell",
+    res = minimize(lambda v: _light_likelihood(post, *v), [theta, phi, log_intensity], method="Powell",
                     options={"xtol": 1e-4, "ftol": 1e-7, "maxfev": 400})
     return tuple(res.x)
 
@@ -340,19 +323,24 @@ def _candidate_lights(post, n=64, keep=6):
     i = np.arange(n) + 0.5
     thetas, phis = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
     for th, ph in zip(thetas, phis):
-        post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
-        img = post.ts.render(np.ones((1, 3)))
-        lit = img.mean(axis=1)[post.keep]
-        if not np.any(lit > 0):
+        log_i = _matched_log_intensity(post, th, ph)
+        if log_i is None:
             continue
-        ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
-        if not ratio > 0:
-            continue
-        log_i = float(np.log(ratio))
         found.append((_light_likelihood(post, th, ph, log_i), th, ph % (2 * np.pi), log_i))
     if not found:
         raise ValueError("no light direction lights the observed pixels")
     return sorted(found)[:keep]
+
+
+def _matched_log_intensity(post, theta, phi):
+    """Log intensity that matches the median observed level of the pixels a light
+    from (theta, phi) reaches under the current reflectance; None if it reaches none."""
+    post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
+    lit = post.ts.render(np.ones((1, 3))).mean(axis=1)[post.keep]
+    if not np.any(lit > 0):
+        return None
+    ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
+    return float(np.log(ratio)) if ratio > 0 else None
 
 
 def _highlight_lights(post):
@@ -404,10 +392,9 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
         best = None
         cands = [c[1:] for c in _candidate_lights(post)]
         for th, ph in _highlight_lights(post):
-            post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
-            lit = post.ts.render(np.ones((1, 3))).mean(axis=1)[post.keep]
-            ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
-            cands.append((th, ph, float(np.log(max(ratio, 1e-30)))))
+            li = _matched_log_intensity(post, th, ph)
+            if li is not None:
+                cands.append((th, ph, li))
         for th, ph, li in cands:
             post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
             p, z, Ls = _reflectance_block(post, psi, logits, np.full((1, 3), np.exp(li)),
@@ -444,7 +431,7 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
         else:
             psi, logits = _reflectance_block(post, psi, logits, L, cfg.block_iters)
         log_i = float(np.log(L[0, 0]))
-        total, _, _, lik = post.reflectance_terms(psi, logits, L)
+        total, lik = post.reflectance_terms(psi, logits, L)
         rows.append({"pass": "directional", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
                      "seconds": time.perf_counter() - t0})
         if progress:

@@ -91,7 +91,7 @@ def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_
     from .forward import TexelSum
     from .illumination import write_exr
     from .render import save_preview
-    from .scene_needs import decide
+    from .scene_needs import decide, dsbrdf_object
     for f, what in ((scene_file, "scene"), (image_file, "image")):
         if not os.path.exists(f):
             raise InputError("%s file %s does not exist" % (what, f))
@@ -108,7 +108,7 @@ def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_
     needs = decide(scene, image, mask, model.basis.n_lobes, model.basis.n_bases)
     if needs.light == "point":
         raise InputError("point lights are not supported yet: use a directional emitter (a distant light)")
-    obj = [s for s in scene.shapes() if "DSBRDF" in str(s.bsdf()).split("[")[0]][0]
+    obj = dsbrdf_object(scene)
     ts = TexelSum(scene, obj, map_size if needs.envmap_block else (1, 1), visibility=needs.visibility)
     keep = ts.mask.copy()
     # silhouette pixels also see the background: use interior pixels only

@@ -84,21 +84,27 @@ def is_grey(image, mask=None, tol=GREY_TOLERANCE) -> bool:
     return bool(np.all(np.abs(px[:, :3] - mean) <= tol * np.maximum(mean, 1e-12)))
 
 
+def dsbrdf_object(scene):
+    """The one shape of ``scene`` with a ``dsbrdf`` BSDF; SceneError otherwise."""
+    objects = [s for s in scene.shapes() if "DSBRDF" in str(s.bsdf()).split("[")[0]]
+    if len(objects) != 1:
+        raise SceneError("inference needs exactly one object with a dsbrdf BSDF, found %d" % len(objects))
+    return objects[0]
+
+
 def decide(scene, image, mask=None, n_lobes=3, n_bases=10) -> SceneNeeds:
     """The needs of ``scene`` (a loaded mi.Scene) observed as ``image`` (H, W, C)."""
     emitters = scene.emitters()
     if len(emitters) != 1:
         raise SceneError("inference needs exactly one light in the scene, found %d" % len(emitters))
-    objects = [s for s in scene.shapes() if "DSBRDF" in str(s.bsdf()).split("[")[0]]
-    if len(objects) != 1:
-        raise SceneError("inference needs exactly one object with a dsbrdf BSDF, found %d" % len(objects))
+    obj = dsbrdf_object(scene)
     reasons = []
     light = light_kind(emitters[0])
     reasons.append("light: %s -> %s" % (light, "illumination-map block" if light == "envmap"
                                        else "direction + intensity by Powell's method, no envmap block"))
     grey = is_grey(image, mask)
     reasons.append("colour pass: %s" % ("no (the image is grey)" if grey else "yes (the image has colour)"))
-    convex, why = is_convex(objects[0])
+    convex, why = is_convex(obj)
     if light != "envmap" and convex:
         why += "; a point light casts no other shadow on it"
     reasons.append("visibility rays: %s (%s)" % ("no" if convex else "yes", why))

@@ -17,6 +17,18 @@ SCENES = {
 }
 
 
+def sphere_scene(bsdf: dict, res: int = 24, fov: float = 30.0):
+    """A unit sphere with ``bsdf`` seen by a perspective camera at distance 4 on
+    +z (res x res box-filtered film), no light: a small scene for the texel-sum
+    forward model (:mod:`mi_dsbrdf.forward`), which brings its own."""
+    import mitsuba as mi
+    return mi.load_dict({"type": "scene", "sensor": {
+        "type": "perspective", "fov": fov,
+        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+        "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},
+        "object": {"type": "sphere", "bsdf": bsdf}})
+
+
 def scene_path(name_or_path: str) -> str:
     """Path of a shipped scene by name (``sphere_envmap`` ...) or a given path."""
     if name_or_path in SCENES:

@@ -53,26 +53,30 @@ def test_texel_sum_matches_monte_carlo_render():
     assert unseen.any() and np.all(d[unseen, 2] < 0) and not unseen[d[:, 2] > 0].any()
 
 
+def psi_texels(psi, env, res):
+    """A TexelSum over a sphere whose dsbrdf is the basis point ``psi``."""
+    s = scene({"type": "dsbrdf", "psi": " ".join(map(str, psi)), "chromaticity_0": "0.5 0.3 0.2"}, res=res)
+    return TexelSum(s, s.shapes()[0], env.shape[:2])
+
+
+def psi_derivative(i, env, res, h=1e-2):
+    """Central difference of the pixel radiance (P, 3) along psi_i, around PSI."""
+    e = np.zeros(10)
+    e[i] = h
+    return (psi_texels(PSI + e, env, res).render(env) - psi_texels(PSI - e, env, res).render(env)) / (2 * h)
+
+
 def test_reflectance_gradient_matches_finite_differences():
     env = smooth_map()
-    s = scene({"type": "dsbrdf", "psi": " ".join(map(str, PSI)), "chromaticity_0": "0.5 0.3 0.2"}, res=24)
-    ts = TexelSum(s, s.shapes()[0], env.shape[:2])
+    ts = psi_texels(PSI, env, 24)
     params = mi.traverse(ts.bsdf)
     dr.enable_grad(params["psi"])
     params.update()
     G = np.random.default_rng(0).normal(size=(ts.n_pixels, 3))
     I, g = ts.reflectance_gradient(env, G, params, ["psi"])
     np.testing.assert_allclose(I, ts.render(env), rtol=1e-5, atol=1e-7)
-    h = 1e-2
     for i in (0, 9):
-        e = np.zeros(10)
-        e[i] = h
-        vals = []
-        for sign in (1, -1):
-            s2 = scene({"type": "dsbrdf", "psi": " ".join(map(str, PSI + sign * e)), "chromaticity_0": "0.5 0.3 0.2"},
-                       res=24)
-            vals.append((TexelSum(s2, s2.shapes()[0], env.shape[:2]).render(env) * G).sum())
-        np.testing.assert_allclose(g["psi"][i], (vals[0] - vals[1]) / (2 * h), rtol=2e-3)
+        np.testing.assert_allclose(g["psi"][i], (psi_derivative(i, env, 24) * G).sum(), rtol=2e-3)
 
 
 def test_visibility_of_a_non_convex_object_matches_monte_carlo():
@@ -95,27 +99,18 @@ def test_visibility_of_a_non_convex_object_matches_monte_carlo():
 
 
 def test_forward_mode_jacobian_matches_finite_differences():
-    from mi_dsbrdf.forward import reflectance_jacobian
     env = smooth_map(8, 16)
-    psi = " ".join(map(str, PSI))
-    s = scene({"type": "dsbrdf", "psi": psi, "chromaticity_0": "0.5 0.3 0.2"}, res=16)
-    ts = TexelSum(s, s.shapes()[0], env.shape[:2])
+    ts = psi_texels(PSI, env, 16)
     params = mi.traverse(ts.bsdf)
     dr.enable_grad(params["psi"])
     dr.enable_grad(params["chromaticity"])
     params.update()
-    image, J = reflectance_jacobian(ts, env, params, ["psi", "chromaticity"])
+    image, J = ts.reflectance_jacobian(env, params, ["psi", "chromaticity"])
     assert J.shape == (ts.n_pixels, 3, 10 + 9)
     np.testing.assert_allclose(image, ts.render(env), rtol=1e-5, atol=1e-7)
-    h = 1e-2
     for i in (0, 4):
-        e = np.zeros(10)
-        e[i] = h
-        r = []
-        for sign in (1, -1):
-            s2 = scene({"type": "dsbrdf", "psi": " ".join(map(str, PSI + sign * e)), "chromaticity_0": "0.5 0.3 0.2"},
-                       res=16)
-            r.append(TexelSum(s2, s2.shapes()[0], env.shape[:2]).render(env))
-        np.testing.assert_allclose(J[:, :, i], (r[0] - r[1]) / (2 * h), rtol=2e-3, atol=1e-5 * np.abs(r[0]).max())
+        fd = psi_derivative(i, env, 16)
+        scale = np.abs(psi_texels(PSI, env, 16).render(env)).max()
+        np.testing.assert_allclose(J[:, :, i], fd, rtol=2e-3, atol=1e-5 * scale)
     # chromaticity of lobe 0, red: the red channel is linear in it, the others do not depend on it
     assert np.abs(J[:, 1:, 10]).max() == 0 and np.abs(J[:, 0, 10]).max() > 0

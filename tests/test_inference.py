@@ -1,13 +1,13 @@
 """End-to-end inference on small synthetic cases (data made by the deterministic forward model)."""
 import math
 
-import mitsuba as mi
 import numpy as np
 import pytest
 
 from mi_dsbrdf import inference, model_data
 from mi_dsbrdf.dsbrdf import Material
 from mi_dsbrdf.forward import TexelSum
+from mi_dsbrdf.scenes import sphere_scene
 
 TRUTH = "gold-metallic-paint"
 RES = 24
@@ -15,11 +15,7 @@ LIGHT = inference.direction_from_angles(1.1, 2.6)      # 40 deg from the viewer
 
 
 def sphere(bsdf):
-    return mi.load_dict({"type": "scene", "sensor": {
-        "type": "perspective", "fov": 30,
-        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
-        "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}}},
-        "object": {"type": "sphere", "bsdf": bsdf}})
+    return sphere_scene(bsdf, RES)
 
 
 @pytest.fixture(scope="module")
