@@ -72,6 +72,21 @@ class TexelSum:
         self.solid_angles = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
         self.visibility = self._trace_visibility(self._scene) if self._trace else None
 
+    def subset(self, rows) -> "TexelSum":
+        """The same view restricted to the pixels ``self.pixels[rows]`` (sharing the
+        light directions): the reflectance block fits 16 variables and needs far
+        fewer pixels than the illumination block, whose unknowns are the texels."""
+        import copy
+        import drjit as dr
+        import mitsuba as mi
+        rows = np.asarray(rows, dtype=np.int64)
+        sub = copy.copy(self)
+        sub.pixels = self.pixels[rows]
+        sub.si = dr.gather(mi.SurfaceInteraction3f, self.si, mi.UInt32(rows.astype(np.uint32)))
+        sub.visibility = None if self.visibility is None else self.visibility[rows]
+        sub._rows = rows
+        return sub
+
     @property
     def n_pixels(self) -> int:
         return self.pixels.size

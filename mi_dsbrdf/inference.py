@@ -43,12 +43,18 @@ class Config:
     tol: float = 1e-3
     seed: int = 0
     block_iters: int = 40
+    #: L-BFGS iterations of the illumination block (each is a product with T: cheap)
+    illumination_iters: int = 200
     #: Laplacian scale b of Eq. 19 in log units: the expected |log error| of a pixel
     likelihood_scale: float = 0.05
     w_gmm: float = 1.0
     w_hue: float = 1.0
     w_entropy: float = 1.0
     w_gradient: float = 1.0
+    #: pixel-texel pairs the reflectance block differentiates per step: it fits
+    #: 16 variables, so an evenly spread subset of the pixels does (Jacobian cost
+    #: is proportional to pixels x texels)
+    reflectance_pairs: int = 1_500_000
 
 
 @dataclasses.dataclass
@@ -80,6 +86,15 @@ class Posterior:
         texels.bsdf = self.bsdf
         self.params = mi.traverse(self.bsdf)
         self.k, self.R = k, R
+        # the reflectance block's pixels: every n-th usable pixel, its likelihood
+        # scaled up to stand for all of them
+        usable = np.nonzero(keep)[0]
+        n_sub = max(64, config.reflectance_pairs // max(texels.n_texels, 1))
+        if usable.size > n_sub:
+            rows = usable[np.linspace(0, usable.size - 1, n_sub).round().astype(np.int64)]
+            self.refl = _View(texels.subset(rows), obs[rows], np.ones(rows.size, bool), usable.size / rows.size)
+        else:
+            self.refl = _View(texels, obs, keep, 1.0)
         self.entropy = EntropyPrior(config.w_entropy)
         self.gradient = GradientPrior(config.w_gradient)
         self._dr = dr
@@ -91,19 +106,27 @@ class Posterior:
         self.params["chromaticity"] = mi.Float(softmax_chroma(logits).reshape(-1).astype(np.float32))
         self.params.update()
 
-    def reflectance_terms(self, psi, logits, L):
-        """(value, likelihood) of likelihood + GMM + hue priors at fixed L (no gradients:
-        the reflectance block takes its derivatives from :meth:`TexelSum.reflectance_jacobian`)."""
-        self.set_reflectance(psi, logits)
-        image = self.ts.render(L)
-        lik, _ = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
-                                      self.offset, self.scale)
-        value = lik
+    def reflectance_prior(self, psi, logits) -> float:
+        """GMM (Eq. 6) + hue (Eq. 12) prior terms."""
+        value = 0.0
         if self.model.gmm is not None:
             value += self.cfg.w_gmm * self.model.gmm.nll(psi)
         if self.model.hue_prior is not None:
             value += self.cfg.w_hue * self.model.hue_prior.nll(softmax_chroma(logits))
-        return value, lik
+        return value
+
+    def reflectance_terms(self, psi, logits, L):
+        """(value, likelihood) of likelihood + GMM + hue priors at fixed L, the
+        likelihood over the reflectance block's pixels (``self.refl``), no
+        gradients: the block takes its derivatives from
+        :meth:`TexelSum.reflectance_jacobian`."""
+        self.set_reflectance(psi, logits)
+        v = self.refl
+        image = v.ts.render(L)
+        lik, _ = log_likelihood_terms(image[:, None, :], v.observed[:, None, :], v.keep[:, None],
+                                      self.offset, self.scale)
+        lik *= v.weight
+        return lik + self.reflectance_prior(psi, logits), lik
 
     # --- illumination ------------------------------------------------------------
     def illumination_terms(self, log_map, T, seen, bins):
@@ -119,38 +142,77 @@ class Posterior:
         return lik + e + s, g + ge + gs, lik
 
 
+@dataclasses.dataclass
+class _View:
+    """Pixels a block works on: their TexelSum, observed values, usable flags and
+    the factor that makes their likelihood stand for all usable pixels."""
+    ts: TexelSum
+    observed: np.ndarray
+    keep: np.ndarray
+    weight: float
+
+
 def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=True, progress=None):
-    """MAP estimate for an envmap scene. Returns (State, log rows)."""
+    """MAP estimate for an envmap scene. Returns (State, log rows).
+
+    Each round: the illumination block (L-BFGS-B on the log map, transport T
+    from the current reflectance), then the reflectance block (Levenberg-
+    Marquardt on psi, chromaticity and the map's overall log scale, over
+    ``post.refl``'s pixels), then the full negative log posterior for the log.
+    The first round of the first pass runs the reflectance block from every
+    start of :func:`reflectance_starts` and keeps the best.
+    """
     cfg = config
     post = Posterior(texels, observed, mask, model, cfg)
     H, W = cfg.map_size
     rng = np.random.default_rng(cfg.seed)
     state = State(np.zeros(post.k), chroma_logits(rng.dirichlet(np.full(3, 5.0), post.R)),
                   np.zeros((H, W, 3)))
-    # constant start, scaled so that the first render matches the image's mean level
-    post.set_reflectance(state.psi, state.logits)
-    T = texels.transport()
-    level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=1)[post.keep]), 1e-12)
-    state.log_map[:] = np.log(max(level, 1e-12))
     rows = []
     t0 = time.perf_counter()
+    # start: each of reflectance_starts with the constant map that matches the
+    # image's median level, refined by one grey illumination block and one
+    # reflectance block; the best posterior starts the alternation
+    best = None
+    for p0 in reflectance_starts(model):
+        post.set_reflectance(p0, state.logits)
+        T = texels.transport()
+        seen = ~unseen_texels(T).reshape(H, W)
+        level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=1)[post.keep]), 1e-12)
+        x = np.full((H, W, 3), np.log(max(level, 1e-12)))
+        bins = post.entropy.bins_for(x)
+        x = _illumination_block(post, x, T, seen, bins, True, cfg.illumination_iters)
+        L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
+        psi, logits, Ls = _reflectance_block(post, p0, state.logits, L, cfg.block_iters, fit_scale=True)
+        value = post.reflectance_terms(psi, logits, Ls)[0]
+        rows.append({"pass": "start", "round": len(rows), "neg_log_posterior": value,
+                     "seconds": time.perf_counter() - t0})
+        if best is None or value < best[0]:
+            best = (value, psi, logits, x + float(np.log(Ls.max() / L.max())))
+    _, state.psi, state.logits, state.log_map = best
+    post.set_reflectance(state.psi, state.logits)
+    T = texels.transport()
+    seen = ~unseen_texels(T).reshape(H, W)
     passes = ["grey", "colour"] if colour else ["grey"]
     for pass_name in passes:
         prev = None
         for rnd in range(cfg.max_rounds):
-            # illumination block
-            post.set_reflectance(state.psi, state.logits)
-            T = texels.transport()
+            # illumination block (T from the current reflectance)
             seen = ~unseen_texels(T).reshape(H, W)
             bins = post.entropy.bins_for(np.where(seen[..., None], state.log_map, state.log_map[seen].min()))
             state.log_map = _illumination_block(post, state.log_map, T, seen, bins, pass_name == "grey",
-                                                cfg.block_iters)
-            L = np.where(seen[..., None], np.exp(state.log_map), 0.0)
-            # reflectance block
-            state.psi, state.logits = _reflectance_block(post, state.psi, state.logits, L, cfg.block_iters)
-            value_r, lik = post.reflectance_terms(state.psi, state.logits, L)
-            value_i, _, _ = post.illumination_terms(state.log_map, texels.transport(), seen, bins)
-            total = value_r + value_i - lik
+                                                cfg.illumination_iters)
+            L = np.where(seen[..., None], np.exp(state.log_map), 0.0).reshape(-1, 3)
+            # reflectance block, with the map's overall scale
+            psi, logits, Ls = _reflectance_block(post, state.psi, state.logits, L, cfg.block_iters,
+                                                 fit_scale=True)
+            state.psi, state.logits = psi, logits
+            state.log_map = state.log_map + float(np.log(Ls.max() / L.max()))
+            # the full posterior at the new point; its T serves the next illumination block
+            post.set_reflectance(state.psi, state.logits)
+            T = texels.transport()
+            value, _, lik = post.illumination_terms(state.log_map, T, seen, bins)
+            total = value + post.reflectance_prior(state.psi, state.logits)
             rows.append({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik,
                          "seconds": time.perf_counter() - t0, "unseen_texels": int((~seen).sum())})
             if progress:
@@ -207,12 +269,13 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
     from .posterior import KINK
     k, R = psi.size, logits.shape[0]
     dr = post._dr
+    view = post.refl
 
     ang = None if direction is None else np.array(direction, dtype=np.float64)
 
     def aim(a):
         if a is not None:
-            post.ts.set_directions(direction_from_angles(*a)[None], [1.0])
+            view.ts.set_directions(direction_from_angles(*a)[None], [1.0])
 
     def total(p, z, sc=0.0, a=None):
         aim(a)
@@ -227,7 +290,7 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
         dr.enable_grad(post.params["chromaticity"])
         post.params.update()
         aim(ang)
-        image, J = post.ts.reflectance_jacobian(L * np.exp(sc), post.params, ["psi", "chromaticity"])
+        image, J = view.ts.reflectance_jacobian(L * np.exp(sc), post.params, ["psi", "chromaticity"])
         dr.disable_grad(post.params["psi"])
         dr.disable_grad(post.params["chromaticity"])
         c = softmax_chroma(logits)
@@ -238,18 +301,18 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
             for j in range(2):
                 e = np.zeros(2)
                 e[j] = 1e-3
-                hi, lo = [(aim(ang + sgn * e), post.ts.render(L * np.exp(sc)))[1] for sgn in (1, -1)]
+                hi, lo = [(aim(ang + sgn * e), view.ts.render(L * np.exp(sc)))[1] for sgn in (1, -1)]
                 extra.append(((hi - lo) / 2e-3)[:, :, None])
             aim(ang)
         J = np.concatenate([J[:, :, :k], Jz] + extra, axis=2)
-        J = J[post.keep].reshape(-1, J.shape[2])
-        mp = np.maximum(image[post.keep], 0) + post.offset
-        d = (np.log(mp) - np.log(np.maximum(post.observed[post.keep], 0) + post.offset)).reshape(-1)
+        J = J[view.keep].reshape(-1, J.shape[2])
+        mp = np.maximum(image[view.keep], 0) + post.offset
+        d = (np.log(mp) - np.log(np.maximum(view.observed[view.keep], 0) + post.offset)).reshape(-1)
         Jd = J / mp.reshape(-1, 1)
         # IRLS weights of the Laplacian, graduated: while most residuals are large the
         # kink is widened to their median (least squares far away, L1 near the optimum)
         kink = max(KINK, float(np.median(np.abs(d))))
-        w = 1.0 / (np.sqrt(d * d + kink * kink) * post.scale)
+        w = view.weight / (np.sqrt(d * d + kink * kink) * post.scale)
         H = Jd.T @ (Jd * w[:, None])
         g = Jd.T @ (w * d)
         if post.model.gmm is not None:
