@@ -1,7 +1,7 @@
 """Synthetic point-light inference cases: how close the current inference gets.
 
 Renders a library material on a small sphere under a directional light with the
-deterministic forward model, then runs ``inference.recover_directional`` with
+deterministic forward model, then runs ``inference.recover_light`` with
 the light known and unknown, and prints the re-render error (mean |log error|),
 the BRDF error on the constrained theta_h range and the light-direction error.
 Work in progress for issue 4: the figures it prints are the tuning target.
@@ -50,7 +50,7 @@ def main():
         ts2 = TexelSum(s2, s2.shapes()[0], (1, 1))
         cfg = inference.Config(max_rounds=1 if known else args.rounds, block_iters=args.iters)
         t0 = time.perf_counter()
-        res, rows = inference.recover_directional(ts2, img, ts2.mask, model, cfg,
+        res, rows = inference.recover_light(ts2, img, ts2.mask, model, cfg,
                                                   known_light=(d, 3.0) if known else None)
         m = Material.from_basis(model.basis, res["psi"], res["chromaticity"])
         mean_log = rows[-1]["likelihood"] * cfg.likelihood_scale / (3 * ts2.mask.sum())

@@ -52,14 +52,34 @@ def cmd_build_model(args):
               len(a["gmm_weights"]), str(a["gmm_covariance_type"]), float(a["hue_kappa"]), out, info["seconds"]))
 
 
+def _map_size(text):
+    try:
+        h, w = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError("map size must be HxW, e.g. 16x32; got %r" % text) from None
+    if h < 2 or w < 4:
+        raise argparse.ArgumentTypeError("map size %dx%d is too small (at least 2x4)" % (h, w))
+    return h, w
+
+
 def cmd_recover(args):
     from .pipeline import recover_files
-    h, w = (int(v) for v in args.map_size.lower().split("x"))
     log = recover_files(args.scene, args.image, args.out, mask_file=args.mask, force=args.force,
-                        map_size=(h, w), rounds=args.rounds, iters=args.iters)
+                        map_size=args.map_size, rounds=args.rounds, iters=args.iters)
     for line in log["needs"]:
         print("  " + line)
+    if log.get("unseen_texels"):
+        print("  %d illumination texels are seen by no pixel: left black (see illumination.png)"
+              % log["unseen_texels"])
     print("recovered in %.1f s -> %s" % (log["seconds"], args.out))
+
+
+def cmd_relight(args):
+    from .render import relight
+    if os.path.exists(args.out) and not args.force:
+        raise MiDsbrdfError("%s exists; pass --force to replace it" % args.out)
+    r = relight(args.material, args.envmap, args.out, shape=args.shape, res=args.res, spp=args.spp)
+    print("relit in %.1f s -> %s, %s" % (r["seconds"], r["exr"], r["png"]))
 
 
 def main(argv=None):
@@ -99,11 +119,21 @@ def main(argv=None):
     p.add_argument("--image", required=True, help="observed HDR image (EXR/HDR), film-sized")
     p.add_argument("--mask", default=None, help="optional mask image (white = use)")
     p.add_argument("--out", required=True, help="result directory")
-    p.add_argument("--map-size", default="16x32", help="illumination map HxW (default 16x32)")
+    p.add_argument("--map-size", default=(16, 32), type=_map_size, help="illumination map HxW (default 16x32)")
     p.add_argument("--rounds", type=int, default=4, help="rounds of alternating blocks per pass")
     p.add_argument("--iters", type=int, default=40, help="iterations per block")
     p.add_argument("--force", action="store_true", help="write into an existing non-empty directory")
     p.set_defaults(func=cmd_recover)
+
+    p = sub.add_parser("relight", help="render a recovered material under a new illumination map")
+    p.add_argument("material", help="material.json (from recover) or a library material name")
+    p.add_argument("--envmap", required=True, help="lat-long HDR/EXR illumination map")
+    p.add_argument("--shape", default="sphere", help="sphere, torus or a .ply/.obj mesh (default sphere)")
+    p.add_argument("--out", required=True, help="output EXR (a PNG is written beside it)")
+    p.add_argument("--res", type=int, default=256)
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--force", action="store_true", help="replace an existing output file")
+    p.set_defaults(func=cmd_relight)
 
     args = ap.parse_args(argv)
     try:

@@ -70,6 +70,20 @@ class TexelSum:
         sum a directional light whose 'radiance' is its irradiance."""
         self.directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         self.solid_angles = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
+        self.light_position = None
+        self.visibility = self._trace_visibility(self._scene) if self._trace else None
+
+    def set_point(self, position):
+        """Light from a point at ``position`` (world): one 'texel' whose direction
+        and solid angle 1/r^2 differ per pixel, so that its 'radiance' is the
+        point light's intensity (W/sr, Mitsuba's ``point`` emitter)."""
+        p = np.asarray(position, dtype=np.float64).reshape(3)
+        x = np.array(self.si.p, dtype=np.float64).T
+        d = p - x
+        r2 = np.maximum((d * d).sum(axis=1), 1e-12)
+        self.directions = d / np.sqrt(r2)[:, None]          # (P, 3): per pixel
+        self.solid_angles = 1.0 / r2                        # (P,)
+        self.light_position = p
         self.visibility = self._trace_visibility(self._scene) if self._trace else None
 
     def subset(self, rows) -> "TexelSum":
@@ -84,6 +98,8 @@ class TexelSum:
         sub.pixels = self.pixels[rows]
         sub.si = dr.gather(mi.SurfaceInteraction3f, self.si, mi.UInt32(rows.astype(np.uint32)))
         sub.visibility = None if self.visibility is None else self.visibility[rows]
+        if self.light_position is not None:
+            sub.directions, sub.solid_angles = self.directions[rows], self.solid_angles[rows]
         sub._rows = rows
         return sub
 
@@ -93,7 +109,7 @@ class TexelSum:
 
     @property
     def n_texels(self) -> int:
-        return self.directions.shape[0]
+        return 1 if self.light_position is not None else self.directions.shape[0]
 
     def _pairs(self, t0, t1):
         """Lanes for texels [t0, t1) x all pixels (pixel-major): (si, wo_local, pixel, texel)."""
@@ -105,7 +121,7 @@ class TexelSum:
         tex = lane - pix * nt + t0
         si = dr.gather(mi.SurfaceInteraction3f, self.si, pix)
         d = mi.Vector3f(*(mi.Float(self.directions[:, k].astype(np.float32)) for k in range(3)))
-        wo = si.to_local(dr.gather(mi.Vector3f, d, tex))
+        wo = si.to_local(dr.gather(mi.Vector3f, d, pix if self.light_position is not None else tex))
         return si, wo, pix, tex
 
     def _chunks(self):
@@ -114,22 +130,27 @@ class TexelSum:
 
     def _trace_visibility(self, scene):
         import drjit as dr
+        import mitsuba as mi
         vis = np.zeros((self.n_pixels, self.n_texels), dtype=bool)
         for t0, t1 in self._chunks():
             si, wo, _, _ = self._pairs(t0, t1)
-            ray = si.spawn_ray(si.to_world(wo))
+            if self.light_position is not None:
+                ray = si.spawn_ray_to(mi.Point3f(*(float(v) for v in self.light_position)))
+            else:
+                ray = si.spawn_ray(si.to_world(wo))
             blocked = scene.ray_test(ray, (wo.z > 0) & (si.wi.z > 0))
             vis[:, t0:t1] = ~np.array(blocked).reshape(self.n_pixels, t1 - t0)
             dr.eval()
         return vis
 
-    def _weights(self, si, wo, tex, t0, t1):
+    def _weights(self, si, wo, pix, tex, t0, t1):
         """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f."""
         import drjit as dr
         import mitsuba as mi
         ctx = mi.BSDFContext()
         f = self.bsdf.eval(ctx, si, wo)
-        omega = dr.gather(mi.Float, mi.Float(self.solid_angles.astype(np.float32)), tex)
+        omega = dr.gather(mi.Float, mi.Float(self.solid_angles.astype(np.float32)),
+                          tex if self.light_position is None else pix)
         f = f * omega
         if self.visibility is not None:
             v = mi.Bool(self.visibility[:, t0:t1].reshape(-1))
@@ -137,20 +158,20 @@ class TexelSum:
         return f
 
     def transport(self) -> np.ndarray:
-        """(P, T, 3) float32 transport T: pixel radiance = sum_t T[p, t] * L[t]."""
+        """(3, P, T) float32 transport, channel-major so that the products with a
+        map are matrix-vector products: radiance[p, c] = T[c, p] @ L[:, c]."""
         import drjit as dr
-        out = np.zeros((self.n_pixels, self.n_texels, 3), dtype=np.float32)
+        out = np.zeros((3, self.n_pixels, self.n_texels), dtype=np.float32)
         with dr.suspend_grad():
             for t0, t1 in self._chunks():
-                si, wo, _, tex = self._pairs(t0, t1)
-                f = self._weights(si, wo, tex, t0, t1)
-                out[:, t0:t1] = np.array(f).T.reshape(self.n_pixels, t1 - t0, 3)
+                si, wo, pix, tex = self._pairs(t0, t1)
+                f = self._weights(si, wo, pix, tex, t0, t1)
+                out[:, :, t0:t1] = np.array(f).reshape(3, self.n_pixels, t1 - t0)
         return out
 
     def render(self, illumination) -> np.ndarray:
         """(P, 3) float64 pixel radiance for an (H, W, 3) map (no gradients)."""
-        L = np.asarray(illumination, dtype=np.float64).reshape(-1, 3)
-        return np.einsum("ptc,tc->pc", self.transport(), L)
+        return apply_transport(self.transport(), illumination)
 
     def _radiance_chunks(self, illumination):
         """Yield (P,) Color3f radiance from each chunk of texels under
@@ -160,8 +181,8 @@ class TexelSum:
         L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
         Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
         for t0, t1 in self._chunks():
-            si, wo, _, tex = self._pairs(t0, t1)
-            f = self._weights(si, wo, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
+            si, wo, pix, tex = self._pairs(t0, t1)
+            f = self._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
             yield dr.block_sum(f, t1 - t0)                   # (P,) radiance from these texels
 
     def reflectance_gradient(self, illumination, grad_pixels, params, keys):
@@ -199,13 +220,20 @@ class TexelSum:
         return image, jac
 
 
+def apply_transport(T, illumination) -> np.ndarray:
+    """(P, 3) float64 radiance of the map ``illumination`` (T texels x 3) under the
+    channel-major transport ``T`` (3, P, T) of :meth:`TexelSum.transport`."""
+    L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
+    return np.stack([T[c] @ L[:, c] for c in range(3)], axis=1).astype(np.float64)
+
+
 def unseen_texels(transport, threshold=1e-6) -> np.ndarray:
     """(T,) bool: texels whose light reaches no observed pixel (left black, reported).
 
     A texel is unseen when its largest transport weight over all pixels is
     below ``threshold`` times the largest weight of any texel.
     """
-    peak = transport.max(axis=(0, 2))
+    peak = transport.max(axis=(0, 1))
     return peak <= threshold * max(float(peak.max()), 1e-30)
 
 

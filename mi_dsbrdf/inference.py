@@ -26,7 +26,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from .fitting import chroma_logits, softmax_chroma
-from .forward import TexelSum, unseen_texels
+from .forward import TexelSum, apply_transport, unseen_texels
 from .posterior import LOG_OFFSET, log_likelihood_terms
 from .priors import EntropyPrior, GradientPrior
 
@@ -54,7 +54,7 @@ class Config:
     #: pixel-texel pairs the reflectance block differentiates per step: it fits
     #: 16 variables, so an evenly spread subset of the pixels does (Jacobian cost
     #: is proportional to pixels x texels)
-    reflectance_pairs: int = 1_500_000
+    reflectance_pairs: int = 500_000
 
 
 @dataclasses.dataclass
@@ -71,7 +71,7 @@ class State:
 class Posterior:
     """-log p(psi, c, L | I) for one scene and image, with gradients by block."""
 
-    def __init__(self, texels: TexelSum, observed, mask, model, config: Config):
+    def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None):
         import drjit as dr
         import mitsuba as mi
         self.ts, self.model, self.cfg = texels, model, config
@@ -95,9 +95,21 @@ class Posterior:
             self.refl = _View(texels.subset(rows), obs[rows], np.ones(rows.size, bool), usable.size / rows.size)
         else:
             self.refl = _View(texels, obs, keep, 1.0)
+        self.point = point          # (centre, distance) of a point light, None: directional
         self.entropy = EntropyPrior(config.w_entropy)
         self.gradient = GradientPrior(config.w_gradient)
         self._dr = dr
+
+    def aim(self, theta, phi):
+        """Light the pixels from the direction (theta, phi) (seen from the object):
+        a directional light, or the point light at ``distance`` from ``centre``
+        that way (its intensity then stands for W/sr, not irradiance)."""
+        d = direction_from_angles(theta, phi)
+        for ts in {id(self.ts): self.ts, id(self.refl.ts): self.refl.ts}.values():
+            if self.point is None:
+                ts.set_directions(d[None], [1.0])
+            else:
+                ts.set_point(np.asarray(self.point[0]) + self.point[1] * d)
 
     # --- reflectance -------------------------------------------------------------
     def set_reflectance(self, psi, logits):
@@ -132,10 +144,11 @@ class Posterior:
     def illumination_terms(self, log_map, T, seen, bins):
         """(value, d/d log_map) of likelihood + entropy + gradient priors at fixed reflectance."""
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
-        image = np.einsum("ptc,tc->pc", T, L.reshape(-1, 3))
+        image = apply_transport(T, L)
         lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
                                           self.offset, self.scale)
-        g_L = np.einsum("ptc,pc->tc", T, g_img[:, 0, :]).reshape(log_map.shape)
+        gi = g_img[:, 0, :].astype(np.float32)
+        g_L = np.stack([gi[:, c] @ T[c] for c in range(3)], axis=1).astype(np.float64).reshape(log_map.shape)
         g = g_L * L
         e, ge = self.entropy(log_map, bins)
         s, gs = self.gradient(log_map)
@@ -178,7 +191,7 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
         post.set_reflectance(p0, state.logits)
         T = texels.transport()
         seen = ~unseen_texels(T).reshape(H, W)
-        level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=1)[post.keep]), 1e-12)
+        level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
         x = np.full((H, W, 3), np.log(max(level, 1e-12)))
         bins = post.entropy.bins_for(x)
         x = _illumination_block(post, x, T, seen, bins, True, cfg.illumination_iters)
@@ -275,7 +288,7 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
 
     def aim(a):
         if a is not None:
-            view.ts.set_directions(direction_from_angles(*a)[None], [1.0])
+            post.aim(*a)
 
     def total(p, z, sc=0.0, a=None):
         aim(a)
@@ -364,7 +377,7 @@ def angles_from_direction(d):
 
 
 def _light_likelihood(post, theta, phi, log_intensity):
-    post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
+    post.aim(theta, phi)
     image = post.ts.render(np.full((1, 3), np.exp(log_intensity)))
     lik, _ = log_likelihood_terms(image[:, None, :], post.observed[:, None, :], post.keep[:, None],
                                   post.offset, post.scale)
@@ -398,7 +411,7 @@ def _candidate_lights(post, n=64, keep=6):
 def _matched_log_intensity(post, theta, phi):
     """Log intensity that matches the median observed level of the pixels a light
     from (theta, phi) reaches under the current reflectance; None if it reaches none."""
-    post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
+    post.aim(theta, phi)
     lit = post.ts.render(np.ones((1, 3))).mean(axis=1)[post.keep]
     if not np.any(lit > 0):
         return None
@@ -429,13 +442,16 @@ def reflectance_starts(model) -> list:
     return starts
 
 
-def recover_directional(texels: TexelSum, observed, mask, model, config=Config(), progress=None,
-                        known_light=None):
-    """MAP estimate for a directional light: returns (result dict, log rows).
+def recover_light(texels: TexelSum, observed, mask, model, config=Config(), progress=None,
+                  known_light=None, point=None):
+    """MAP estimate for a directional or point light: returns (result dict, log rows).
 
     The light is a direction (unit vector from the object towards the light)
-    and a non-negative intensity (irradiance, RGB-equal: the colour is the
-    material's). A wrong reflectance biases the light and the other way round,
+    and a non-negative intensity (RGB-equal: the colour is the material's):
+    irradiance for a directional light; for a point light (``point`` =
+    (centre, distance): the light sits at ``distance`` from ``centre`` in that
+    direction, the distance taken from the scene) the radiant intensity in W/sr.
+    A wrong reflectance biases the light and the other way round,
     so the search starts globally: the best few of 64 directions under the mean
     material each get a short reflectance fit and a Powell refinement, and the
     best posterior among them starts the alternation (Powell's method for the
@@ -444,7 +460,7 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
     (direction, intensity) skips the light search and block.
     """
     cfg = config
-    post = Posterior(texels, observed, mask, model, cfg)
+    post = Posterior(texels, observed, mask, model, cfg, point=point)
     rng = np.random.default_rng(cfg.seed)
     logits = chroma_logits(rng.dirichlet(np.full(3, 5.0), post.R))
     psi = np.zeros(post.k)
@@ -459,13 +475,13 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
             if li is not None:
                 cands.append((th, ph, li))
         for th, ph, li in cands:
-            post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
+            post.aim(th, ph)
             p, z, Ls = _reflectance_block(post, psi, logits, np.full((1, 3), np.exp(li)),
                                           max(cfg.block_iters // 4, 5), fit_scale=True)
             li = float(np.log(Ls[0, 0]))
             post.set_reflectance(p, z)
             th, ph, li = _light_block(post, th, ph, li)
-            post.ts.set_directions(direction_from_angles(th, ph)[None], [1.0])
+            post.aim(th, ph)
             value = post.reflectance_terms(p, z, np.full((1, 3), np.exp(li)))[0]
             rows.append({"pass": "light search", "round": len(rows), "neg_log_posterior": value,
                          "seconds": time.perf_counter() - t0})
@@ -481,7 +497,7 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
         if known_light is None:
             theta, phi, log_i = _light_block(post, theta, phi, log_i)
         L = np.full((1, 3), np.exp(log_i))
-        post.ts.set_directions(direction_from_angles(theta, phi)[None], [1.0])
+        post.aim(theta, phi)
         if rnd == 0:
             # the reflectance block from every start (psi found so far, the mean, GMM means)
             cands = [_reflectance_block(post, p0, logits, L, cfg.block_iters, fit_scale=known_light is None)
@@ -495,12 +511,15 @@ def recover_directional(texels: TexelSum, observed, mask, model, config=Config()
             psi, logits = _reflectance_block(post, psi, logits, L, cfg.block_iters)
         log_i = float(np.log(L[0, 0]))
         total, lik = post.reflectance_terms(psi, logits, L)
-        rows.append({"pass": "directional", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
+        rows.append({"pass": "light", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
                      "seconds": time.perf_counter() - t0})
         if progress:
             progress(rows[-1])
         if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
             break
         prev = total
-    return {"psi": psi, "chromaticity": softmax_chroma(logits), "direction": direction_from_angles(theta, phi),
-            "intensity": float(np.exp(log_i))}, rows
+    result = {"psi": psi, "chromaticity": softmax_chroma(logits), "direction": direction_from_angles(theta, phi),
+              "intensity": float(np.exp(log_i))}
+    if point is not None:
+        result["position"] = np.asarray(point[0]) + point[1] * result["direction"]
+    return result, rows

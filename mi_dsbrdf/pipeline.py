@@ -3,10 +3,12 @@
 Result directory (the stable output contract):
 
     material.json       DSBRDF parameters (``dsbrdf`` plugin ``filename``, ``load_material``)
-    illumination.exr    lat-long map, Mitsuba envmap convention       (envmap scenes)
-    light.json          {"direction": unit vector object -> light, "intensity"}   (directional light)
+    illumination.exr    lat-long map, Mitsuba envmap convention (unseen texels black)   (envmap scenes)
+    light.json          {"type", "direction": unit vector object -> light, "intensity"
+                         (irradiance, or W/sr for a point light, which also has "position")}
+    scene.xml           the input scene with the recovered material and light
     log.json            what the scene needed and why, every round's posterior terms and time
-    input.png, rerender.png, residual.png    previews
+    input.png, rerender.png, residual.png, material.png (spheres), illumination.png    previews
 """
 from __future__ import annotations
 
@@ -90,6 +92,7 @@ def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_
     from .dsbrdf import Material
     from .forward import TexelSum
     from .illumination import write_exr
+    from .outputs import illumination_preview, material_preview, write_scene_xml
     from .render import save_preview
     from .scene_needs import decide, dsbrdf_object
     for f, what in ((scene_file, "scene"), (image_file, "image")):
@@ -106,8 +109,6 @@ def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_
     prepare_out(out, force)
     model = model_data.shipped_model()
     needs = decide(scene, image, mask, model.basis.n_lobes, model.basis.n_bases)
-    if needs.light == "point":
-        raise InputError("point lights are not supported yet: use a directional emitter (a distant light)")
     obj = dsbrdf_object(scene)
     ts = TexelSum(scene, obj, map_size if needs.envmap_block else (1, 1), visibility=needs.visibility)
     keep = ts.mask.copy()
@@ -135,21 +136,34 @@ def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_
     if needs.envmap_block:
         state, rows = inference.recover(ts, image, keep, model, cfg, colour=needs.colour_pass, progress=report)
         psi, chroma = state.psi, state.chromaticity
-        L = np.exp(state.log_map)
-        write_exr(os.path.join(out, "illumination.exr"), L)
-        light = None
+        seen = state.log_map[..., 0] > inference.BLACK
+        L = np.where(seen[..., None], np.exp(state.log_map), 0.0)      # unseen texels: black
+        light = {"type": "envmap", "filename": os.path.join(out, "illumination.exr")}
+        write_exr(light["filename"], L)
+        illumination_preview(L, os.path.join(out, "illumination.png"), seen=seen)
     else:
-        res, rows = inference.recover_directional(ts, image, keep, model, cfg, progress=report)
+        point = None
+        if needs.light == "point":
+            point = (_centre(obj), point_light_distance(scene, obj))
+        res, rows = inference.recover_light(ts, image, keep, model, cfg, progress=report, point=point)
         psi, chroma = res["psi"], res["chromaticity"]
-        light = {"direction": [float(v) for v in res["direction"]], "intensity": res["intensity"]}
+        light = {"type": needs.light, "direction": [float(v) for v in res["direction"]],
+                 "intensity": res["intensity"]}
+        if point is not None:
+            light["position"] = [float(v) for v in res["position"]]
+            ts.set_point(res["position"])
+        else:
+            ts.set_directions(np.asarray(res["direction"])[None], [1.0])
         with open(os.path.join(out, "light.json"), "w") as f:
             json.dump(light, f, indent=1)
         L = np.full((1, 3), res["intensity"])
-        ts.set_directions(np.asarray(res["direction"])[None], [1.0])
     if bar is not None:
         bar.close()
     material = Material.from_basis(model.basis, psi, chroma, name="recovered")
-    material.save(os.path.join(out, "material.json"))
+    material_file = os.path.join(out, "material.json")
+    material.save(material_file)
+    write_scene_xml(scene_file, os.path.join(out, "scene.xml"), material_file, light)
+    material_preview(material_file, os.path.join(out, "material.png"))
     # previews: input, re-render with the recovered parameters, residual
     ts.bsdf = mi.load_dict({"type": "dsbrdf", "filename": os.path.join(out, "material.json")})
     rerender = np.zeros_like(image)
@@ -160,7 +174,28 @@ def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_
     save_preview((resid * keep[..., None]).astype(np.float32), os.path.join(out, "residual.png"))
     log = {"scene": os.fspath(scene_file), "image": os.fspath(image_file), "needs": list(needs.reasons),
            "rounds": rows, "seconds": time.perf_counter() - t0, "light": light,
-           "unobserved_texels": rows[-1].get("unseen_texels") if rows else None}
+           "unseen_texels": rows[-1].get("unseen_texels") if rows else None}
     with open(os.path.join(out, "log.json"), "w") as f:
         json.dump(log, f, indent=1, default=float)
     return log
+
+
+def _centre(shape) -> np.ndarray:
+    bbox = shape.bbox()
+    return (np.array(bbox.min, dtype=np.float64) + np.array(bbox.max, dtype=np.float64)) / 2
+
+
+def point_light_distance(scene, shape) -> float:
+    """Distance of the scene's point light from the object's centre: inference
+    recovers the light's direction and intensity and keeps this distance (one
+    image barely constrains it); InputError if the light is inside the object."""
+    import mitsuba as mi
+    position = np.array(mi.traverse(scene.emitters()[0])["position"], dtype=np.float64).reshape(3)
+    centre = _centre(shape)
+    bbox = shape.bbox()
+    radius = 0.5 * np.linalg.norm(np.array(bbox.max, dtype=np.float64) - np.array(bbox.min, dtype=np.float64))
+    distance = float(np.linalg.norm(position - centre))
+    if distance <= radius:
+        raise InputError("the point light at %s is inside the object's bounding sphere (radius %.3g around %s): "
+                         "place it outside" % (position.tolist(), radius, centre.tolist()))
+    return distance

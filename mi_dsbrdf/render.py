@@ -35,3 +35,50 @@ def render_to_files(scene_file, out_stem, spp=None, **params) -> dict:
     write_exr(out_stem + ".exr", img)
     save_preview(img, out_stem + ".png")
     return {"exr": out_stem + ".exr", "png": out_stem + ".png", "seconds": seconds}
+
+
+#: Shapes ``relight`` knows by name; anything else is a mesh file (.ply/.obj).
+RELIGHT_SHAPES = ("sphere", "torus")
+
+
+def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=64) -> dict:
+    """Render a recovered (or library) material on ``shape`` under a lat-long
+    ``envmap_file`` with Mitsuba's path tracer; writes ``out_file`` (EXR) and a
+    PNG beside it. ``material_file``: a material.json or a library name."""
+    import mitsuba as mi
+    from .errors import MiDsbrdfError
+    from .library import library_names
+    from .scenes import SCENE_DIR
+    bsdf = {"type": "dsbrdf"}
+    if os.path.exists(os.fspath(material_file)):
+        bsdf["filename"] = os.path.abspath(os.fspath(material_file))
+    elif str(material_file) in library_names():
+        bsdf["material"] = str(material_file)
+    else:
+        raise MiDsbrdfError("material %s is neither a file nor a library material" % material_file)
+    if not os.path.exists(os.fspath(envmap_file)):
+        raise MiDsbrdfError("envmap %s does not exist" % envmap_file)
+    if shape == "sphere":
+        obj = {"type": "sphere"}
+    elif shape == "torus":
+        obj = {"type": "ply", "filename": os.path.join(SCENE_DIR, "meshes", "torus.ply")}
+    elif os.path.exists(shape) and shape.lower().endswith((".ply", ".obj")):
+        obj = {"type": shape.lower().rsplit(".", 1)[1], "filename": os.path.abspath(shape)}
+    else:
+        raise MiDsbrdfError("shape %r: give %s or an existing .ply/.obj file" % (shape, " or ".join(RELIGHT_SHAPES)))
+    obj["bsdf"] = bsdf
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "path", "max_depth": 4},
+        "sensor": {"type": "perspective", "fov": 32,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": res, "height": res}},
+        "object": obj, "emitter": {"type": "envmap", "filename": os.path.abspath(os.fspath(envmap_file))}})
+    t0 = time.perf_counter()
+    img = np.array(mi.render(scene, spp=spp), dtype=np.float32)
+    if not np.all(np.isfinite(img)):
+        raise FloatingPointError("relighting produced non-finite pixels")
+    from .illumination import write_exr
+    write_exr(out_file, img)
+    png = os.path.splitext(os.fspath(out_file))[0] + ".png"
+    save_preview(img, png)
+    return {"exr": os.fspath(out_file), "png": png, "seconds": time.perf_counter() - t0}

@@ -14,6 +14,7 @@ SCENES = {
     "sphere_envmap": "sphere_envmap.xml",
     "sphere_directional": "sphere_directional.xml",
     "torus_envmap": "torus_envmap.xml",
+    "sphere_point": "sphere_point.xml",
 }
 
 

@@ -37,6 +37,8 @@ class DSBRDF(mi.BSDF):
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
         params = {k: props[k] for k in props.keys()}
+        if "filename" in params:     # relative to the scene file's folder, like Mitsuba's own plugins
+            params["filename"] = str(mi.file_resolver().resolve(params["filename"]))
         material, basis = material_from_params(params)
         self.material = material
         self.basis = basis

@@ -46,7 +46,7 @@ def test_texel_sum_matches_monte_carlo_render():
     err = np.abs(img[sel] - ref) / ref
     assert ts.n_pixels > 500 and np.mean(err) < 0.03 and np.percentile(err, 95) < 0.08, (np.mean(err), err.max())
     T = ts.transport()
-    assert T.shape == (ts.n_pixels, 512, 3) and np.all(T >= 0)
+    assert T.shape == (3, ts.n_pixels, 512) and np.all(T >= 0)
     # texels straight behind the sphere light no visible point: unseen; none in front is
     unseen = unseen_texels(T)
     d = latlong_directions(16, 32).reshape(-1, 3)

@@ -52,7 +52,7 @@ def test_known_point_light_recovers_the_dsbrdf(observed):
     ts = TexelSum(s, s.shapes()[0], (1, 1))
     model = model_data.shipped_model()
     cfg = inference.Config(max_rounds=1, block_iters=40)
-    res, rows = inference.recover_directional(ts, observed, ts.mask, model, cfg, known_light=(LIGHT, 3.0))
+    res, rows = inference.recover_light(ts, observed, ts.mask, model, cfg, known_light=(LIGHT, 3.0))
     assert all(np.isfinite(r["neg_log_posterior"]) for r in rows)
     mean_log = rows[-1]["likelihood"] * cfg.likelihood_scale / (3 * ts.mask.sum())
     assert mean_log < 0.005                                    # re-render: mean |log error| < 0.5 %
@@ -64,7 +64,7 @@ def test_unknown_point_light_direction_within_a_degree(observed):
     s = sphere({"type": "dsbrdf"})
     ts = TexelSum(s, s.shapes()[0], (1, 1))
     model = model_data.shipped_model()
-    res, rows = inference.recover_directional(ts, observed, ts.mask, model,
+    res, rows = inference.recover_light(ts, observed, ts.mask, model,
                                               inference.Config(max_rounds=4, block_iters=40))
     err = math.degrees(math.acos(min(1.0, float(res["direction"] @ LIGHT))))
     assert err < 1.0, err
