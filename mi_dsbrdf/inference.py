@@ -44,7 +44,7 @@ class Config:
     seed: int = 0
     block_iters: int = 40
     #: L-BFGS iterations of the illumination block (each is a product with T: cheap)
-    illumination_iters: int = 200
+    illumination_iters: int = 60
     #: Laplacian scale b of Eq. 19 in log units: the expected |log error| of a pixel
     likelihood_scale: float = 0.05
     w_gmm: float = 1.0
@@ -172,8 +172,8 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
     from the current reflectance), then the reflectance block (Levenberg-
     Marquardt on psi, chromaticity and the map's overall log scale, over
     ``post.refl``'s pixels), then the full negative log posterior for the log.
-    The first round of the first pass runs the reflectance block from every
-    start of :func:`reflectance_starts` and keeps the best.
+    It starts from the best of :func:`reflectance_starts`, each given a short
+    grey illumination block and a short reflectance block.
     """
     cfg = config
     post = Posterior(texels, observed, mask, model, cfg)
@@ -194,12 +194,15 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
         level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
         x = np.full((H, W, 3), np.log(max(level, 1e-12)))
         bins = post.entropy.bins_for(x)
-        x = _illumination_block(post, x, T, seen, bins, True, cfg.illumination_iters)
+        x = _illumination_block(post, x, T, seen, bins, True, max(cfg.illumination_iters // 2, 5))
         L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
-        psi, logits, Ls = _reflectance_block(post, p0, state.logits, L, cfg.block_iters, fit_scale=True)
+        psi, logits, Ls = _reflectance_block(post, p0, state.logits, L, max(cfg.block_iters // 2, 5),
+                                             fit_scale=True)
         value = post.reflectance_terms(psi, logits, Ls)[0]
         rows.append({"pass": "start", "round": len(rows), "neg_log_posterior": value,
                      "seconds": time.perf_counter() - t0})
+        if progress:
+            progress(rows[-1])
         if best is None or value < best[0]:
             best = (value, psi, logits, x + float(np.log(Ls.max() / L.max())))
     _, state.psi, state.logits, state.log_map = best
@@ -257,7 +260,7 @@ def _illumination_block(post, log_map, T, seen, bins, grey, iters):
 
     x0 = log_map.reshape(-1, 3)[idx]
     v0 = x0.mean(axis=1) if grey else x0.reshape(-1)
-    res = minimize(fun, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters},
+    res = minimize(fun, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters, "maxfun": 2 * iters},
                    bounds=[(BLACK + 1, 30.0)] * v0.size)
     return unpack(res.x)
 
@@ -485,6 +488,8 @@ def recover_light(texels: TexelSum, observed, mask, model, config=Config(), prog
             value = post.reflectance_terms(p, z, np.full((1, 3), np.exp(li)))[0]
             rows.append({"pass": "light search", "round": len(rows), "neg_log_posterior": value,
                          "seconds": time.perf_counter() - t0})
+            if progress:
+                progress(rows[-1])
             if best is None or value < best[0]:
                 best = (value, p, z, th, ph, li)
         _, psi, logits, theta, phi, log_i = best

@@ -1,27 +1,49 @@
-"""The command line: the demo (the README's main job) and output-directory safety."""
+"""The command line: the demo (the README's main job), relight, and output safety."""
+import json
+import math
 import subprocess
 import sys
 
+import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.cli import main
-from mi_dsbrdf.scenes import SCENES
+from mi_dsbrdf.scenes import SCENE_DIR
 
 
-def test_demo_writes_exr_and_png_and_never_overwrites(tmp_path):
+def test_demo_recovers_and_reports_and_never_overwrites(tmp_path):
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--spp", "4"]) == 0
-    for name in SCENES:
-        assert (out / (name + ".exr")).stat().st_size > 0
-        assert (out / (name + ".png")).stat().st_size > 0
-    import mitsuba as mi
-    img = np.array(mi.Bitmap(str(out / "sphere_envmap.exr")))
-    assert img.shape == (128, 128, 3) and np.isfinite(img).all() and img.max() > 0
-    before = (out / "sphere_envmap.exr").stat().st_mtime_ns
+    assert main(["demo", "--out", str(out), "--res", "24", "--map-size", "4x8", "--rounds", "1", "--iters", "3",
+                 "--spp", "16"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    for key in ("brdf_log_rmse_scale_invariant", "illumination_log_rmse_after_scale", "relit_log_rmse_after_scale"):
+        assert math.isfinite(report[key]) and report[key] >= 0, key
+    for f in ("report.md", "comparison.png", "observed.exr", "recovered/material.json",
+              "recovered/illumination.exr", "recovered/scene.xml"):
+        assert (out / f).stat().st_size > 0, f
+    before = (out / "report.json").stat().st_mtime_ns
     r = subprocess.run([sys.executable, "-m", "mi_dsbrdf.cli", "demo", "--out", str(out)],
                        capture_output=True, text=True)
     assert r.returncode != 0 and "--force" in r.stderr
-    assert (out / "sphere_envmap.exr").stat().st_mtime_ns == before
+    assert (out / "report.json").stat().st_mtime_ns == before
+
+
+def test_relight_renders_a_material_and_refuses_bad_input(tmp_path, capsys):
+    sky = "%s/textures/sky.exr" % SCENE_DIR
+    out = tmp_path / "relit.exr"
+    assert main(["relight", "gold-metallic-paint", "--envmap", sky, "--out", str(out), "--res", "24",
+                 "--spp", "8"]) == 0
+    img = np.array(mi.Bitmap(str(out)))
+    assert img.shape == (24, 24, 3) and np.isfinite(img).all() and img[12, 12].max() > 0
+    assert (tmp_path / "relit.png").stat().st_size > 0
+    assert main(["relight", "gold-metallic-paint", "--envmap", sky, "--out", str(out)]) == 1
+    assert "--force" in capsys.readouterr().err
+    for args, message in ((["nope-material", "--envmap", sky], "neither a file nor a library material"),
+                          (["gold-metallic-paint", "--envmap", str(tmp_path / "none.exr")], "does not exist"),
+                          (["gold-metallic-paint", "--envmap", sky, "--shape", "cube"], "shape 'cube'")):
+        assert main(["relight"] + args + ["--out", str(tmp_path / "x.exr")]) == 1
+        assert message in capsys.readouterr().err
+        assert not (tmp_path / "x.exr").exists()
 
 
 def test_render_missing_scene_is_a_clear_error(tmp_path, capsys):
@@ -30,6 +52,11 @@ def test_render_missing_scene_is_a_clear_error(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_bad_map_size_is_a_usage_error(tmp_path, capsys):
+    import pytest
+    with pytest.raises(SystemExit):
+        main(["recover", "--scene", "s.xml", "--image", "i.exr", "--out", str(tmp_path / "o"), "--map-size", "16by32"])
+    assert "HxW" in capsys.readouterr().err
 def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys):
     existing = tmp_path / "model.npz"
     existing.write_bytes(b"keep me")

@@ -114,3 +114,32 @@ def test_forward_mode_jacobian_matches_finite_differences():
         np.testing.assert_allclose(J[:, :, i], fd, rtol=2e-3, atol=1e-5 * scale)
     # chromaticity of lobe 0, red: the red channel is linear in it, the others do not depend on it
     assert np.abs(J[:, 1:, 10]).max() == 0 and np.abs(J[:, 0, 10]).max() > 0
+
+
+def test_point_light_matches_monte_carlo_render():
+    pos = [2.0, 1.5, 2.5]
+    s = mi.load_dict({"type": "scene", "integrator": {"type": "direct"},
+                      "sensor": {"type": "perspective", "fov": 30,
+                                 "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0],
+                                                                            up=[0, 1, 0]),
+                                 "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}}},
+                      "object": {"type": "sphere", "bsdf": {"type": "dsbrdf", "material": "gold-metallic-paint"}},
+                      "light": {"type": "point", "position": pos, "intensity": {"type": "rgb", "value": 7.0}}})
+    ref = np.array(mi.render(s, spp=256, seed=0)).reshape(-1, 3)
+    ts = TexelSum(s, s.shapes()[0], (1, 1))
+    ts.set_point(pos)
+    img = ts.render(np.full((1, 3), 7.0))
+    r = ref[ts.pixels]
+    lit = r.mean(axis=1) > 1e-2 * r.mean()
+    assert ts.n_texels == 1 and lit.sum() > 200
+    assert np.median(np.abs(img[lit] - r[lit]) / r[lit]) < 0.02
+    # per pixel: the unit direction to the light and 1/r^2 from the surface point
+    x = np.array(ts.si.p, dtype=np.float64).T
+    r = np.asarray(pos) - x
+    np.testing.assert_allclose(ts.directions * np.linalg.norm(r, axis=1)[:, None], r, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(ts.solid_angles * (r * r).sum(axis=1), 1.0, rtol=1e-6)
+    ts.set_point(2 * np.array(pos))
+    far = ts.render(np.full((1, 3), 7.0))
+    # a subset of pixels keeps its per-pixel light directions
+    sub = ts.subset(np.arange(0, ts.n_pixels, 7))
+    np.testing.assert_allclose(sub.render(np.full((1, 3), 7.0)), far[::7], rtol=1e-6)

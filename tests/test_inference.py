@@ -47,7 +47,7 @@ def brdf_error(res, model, ts, scale_invariant=False):
     return np.abs(d - np.median(d) if scale_invariant else d)
 
 
-def test_known_point_light_recovers_the_dsbrdf(observed):
+def test_known_directional_light_recovers_the_dsbrdf(observed):
     s = sphere({"type": "dsbrdf"})
     ts = TexelSum(s, s.shapes()[0], (1, 1))
     model = model_data.shipped_model()
@@ -60,7 +60,7 @@ def test_known_point_light_recovers_the_dsbrdf(observed):
     assert np.median(err) < 0.05, np.median(err)              # BRDF at the observed angles within 5 %
 
 
-def test_unknown_point_light_direction_within_a_degree(observed):
+def test_unknown_directional_light_within_a_degree(observed):
     s = sphere({"type": "dsbrdf"})
     ts = TexelSum(s, s.shapes()[0], (1, 1))
     model = model_data.shipped_model()
@@ -70,3 +70,42 @@ def test_unknown_point_light_direction_within_a_degree(observed):
     assert err < 1.0, err
     assert res["intensity"] > 0 and np.isfinite(res["intensity"])
     assert np.median(brdf_error(res, model, ts, scale_invariant=True)) < 0.05
+
+
+def test_unknown_point_light_at_a_finite_distance_within_a_degree():
+    pos = 5.0 * LIGHT
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (1, 1))
+    ts.set_point(pos)
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(np.full((1, 3), 40.0))
+    s2 = sphere({"type": "dsbrdf"})
+    ts2 = TexelSum(s2, s2.shapes()[0], (1, 1))
+    res, rows = inference.recover_light(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(),
+                                        inference.Config(max_rounds=3, block_iters=30), point=(np.zeros(3), 5.0))
+    err = math.degrees(math.acos(min(1.0, float(res["direction"] @ LIGHT))))
+    assert err < 1.0, err
+    np.testing.assert_allclose(res["position"], 5.0 * res["direction"], rtol=1e-9)
+    assert all(np.isfinite(r["neg_log_posterior"]) for r in rows)
+
+
+def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
+    from mi_dsbrdf.illumination import procedural_sky
+    sky = procedural_sky(16, 32).astype(np.float64)
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (16, 32))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(sky)
+    s2 = sphere({"type": "dsbrdf"})
+    ts2 = TexelSum(s2, s2.shapes()[0], (8, 16))
+    cfg = inference.Config(map_size=(8, 16), max_rounds=2, block_iters=5, illumination_iters=20)
+    state, rows = inference.recover(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(), cfg)
+    passes = [r["pass"] for r in rows]
+    assert passes.count("start") == len(inference.reflectance_starts(model_data.shipped_model()))
+    assert "grey" in passes and "colour" in passes
+    grey = [r["neg_log_posterior"] for r in rows if r["pass"] == "grey"]
+    colour = [r["neg_log_posterior"] for r in rows if r["pass"] == "colour"]
+    assert all(np.isfinite(grey + colour)) and colour[-1] < grey[0]
+    # texels straight behind the sphere are seen by no pixel: black, and counted
+    unseen = state.log_map[..., 0] == inference.BLACK
+    assert unseen.sum() == rows[-1]["unseen_texels"] > 0

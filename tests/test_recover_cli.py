@@ -1,6 +1,7 @@
 """`mi-dsbrdf recover`: the result directory, and clear errors on bad input (nothing written)."""
 import json
 import math
+import os
 
 import mitsuba as mi
 import numpy as np
@@ -30,11 +31,12 @@ def case(tmp_path_factory):
 
 
 def test_recover_writes_the_result_directory(case, tmp_path):
-    d, _ = case
+    d, img = case
     out = tmp_path / "out"
     assert main(["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"), "--out", str(out),
                  "--rounds", "2", "--iters", "20"]) == 0
-    for f in ("material.json", "light.json", "log.json", "input.png", "rerender.png", "residual.png"):
+    for f in ("material.json", "light.json", "log.json", "scene.xml", "input.png", "rerender.png", "residual.png",
+              "material.png"):
         assert (out / f).stat().st_size > 0, f
     light = json.loads((out / "light.json").read_text())
     truth = -np.array([-0.5, -0.5, -0.7071])
@@ -42,6 +44,10 @@ def test_recover_writes_the_result_directory(case, tmp_path):
     assert math.degrees(math.acos(min(1.0, float(np.dot(light["direction"], truth))))) < 2.0
     log = json.loads((out / "log.json").read_text())
     assert any("Powell" in n for n in log["needs"]) and all(math.isfinite(r["neg_log_posterior"]) for r in log["rounds"])
+    # scene.xml re-renders the input with the recovered material and light, from any working directory
+    rerender = np.array(mi.render(mi.load_file(str(out / "scene.xml")), spp=64, seed=1))
+    lit = img.mean(axis=2) > 1e-2 * img.mean()
+    assert np.median(np.abs(np.log(rerender[lit]) - np.log(img[lit]))) < 0.05
     # the material loads into the plugin and evaluates
     from mi_dsbrdf import load_material
     v = load_material(str(out / "material.json")).eval([0.1], [0.2])
@@ -83,3 +89,45 @@ def test_empty_mask_and_existing_output(case, tmp_path, capsys):
     assert main(["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"), "--out", str(out)]) == 1
     assert "--force" in capsys.readouterr().err and (out / "keep.txt").read_text() == "mine"
     assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+
+
+def test_point_light_and_envmap_scenes(tmp_path):
+    """A point-light scene gets a position; an envmap scene an illumination map, its
+    preview and a scene.xml with the map, from a mesh scene given by a relative path."""
+    xml = open(scene_path("sphere_point")).read().replace('name="res" value="128"', 'name="res" value="24"')
+    (tmp_path / "point.xml").write_text(xml)
+    truth = xml.replace('<bsdf type="dsbrdf" id="material"/>',
+                        '<bsdf type="dsbrdf" id="material"><string name="material" value="blue-acrylic"/></bsdf>')
+    (tmp_path / "truth.xml").write_text(truth)
+    write_exr(tmp_path / "point.exr", np.array(mi.render(mi.load_file(str(tmp_path / "truth.xml")), spp=64, seed=0)))
+    out = tmp_path / "out_point"
+    assert main(["recover", "--scene", str(tmp_path / "point.xml"), "--image", str(tmp_path / "point.exr"),
+                 "--out", str(out), "--rounds", "2", "--iters", "15"]) == 0
+    light = json.loads((out / "light.json").read_text())
+    truth_dir = np.array([2.5, 2.0, 3.0]) / np.linalg.norm([2.5, 2.0, 3.0])
+    assert light["type"] == "point" and math.degrees(math.acos(min(1.0, np.dot(light["direction"], truth_dir)))) < 3
+    np.testing.assert_allclose(np.linalg.norm(light["position"]), np.linalg.norm([2.5, 2.0, 3.0]), rtol=1e-6)
+    assert "point" in (out / "scene.xml").read_text()
+
+    from mi_dsbrdf.scenes import SCENE_DIR
+    torus = open(scene_path("torus_envmap")).read().replace('name="res" value="128"', 'name="res" value="24"')
+    (tmp_path / "meshes").mkdir()
+    import shutil
+    shutil.copy(os.path.join(SCENE_DIR, "meshes", "torus.ply"), tmp_path / "meshes" / "torus.ply")
+    torus = torus.replace('value="textures/sky.exr"', 'value="%s"' % os.path.join(SCENE_DIR, "textures", "sky.exr"))
+    (tmp_path / "torus.xml").write_text(torus)
+    img = np.array(mi.render(mi.load_file(str(tmp_path / "torus.xml")), spp=16, seed=0))
+    write_exr(tmp_path / "torus.exr", img)
+    out = tmp_path / "out_torus"
+    assert main(["recover", "--scene", str(tmp_path / "torus.xml"), "--image", str(tmp_path / "torus.exr"),
+                 "--out", str(out), "--map-size", "4x8", "--rounds", "1", "--iters", "3"]) == 0
+    for f in ("illumination.exr", "illumination.png", "scene.xml", "material.png"):
+        assert (out / f).stat().st_size > 0, f
+    log = json.loads((out / "log.json").read_text())
+    assert any("visibility rays: yes" in n for n in log["needs"])
+    env = np.array(mi.Bitmap(str(out / "illumination.exr")))
+    assert env.shape == (4, 8, 3) and np.isfinite(env).all() and np.all(env >= 0)
+    # the written scene loads (mesh path made absolute, the map beside it) and renders finite pixels
+    assert str(tmp_path / "meshes" / "torus.ply") in (out / "scene.xml").read_text()
+    rerender = np.array(mi.render(mi.load_file(str(out / "scene.xml")), spp=4))
+    assert np.isfinite(rerender).all() and rerender.max() > 0
