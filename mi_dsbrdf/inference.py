@@ -118,6 +118,19 @@ class Posterior:
         self.params["chromaticity"] = mi.Float(softmax_chroma(logits).reshape(-1).astype(np.float32))
         self.params.update()
 
+    def prior_terms(self, psi, logits, log_map=None, bins=None) -> dict:
+        """The weighted prior terms one by one, for the log: GMM (Eq. 6), hue (Eq. 12)
+        and, given a map, entropy (Eq. 13-15) and gradient (Eq. 16)."""
+        terms = {}
+        if self.model.gmm is not None:
+            terms["gmm"] = self.cfg.w_gmm * self.model.gmm.nll(psi)
+        if self.model.hue_prior is not None:
+            terms["hue"] = self.cfg.w_hue * self.model.hue_prior.nll(softmax_chroma(logits))
+        if log_map is not None:
+            terms["entropy"] = self.entropy(log_map, bins)[0]
+            terms["gradient"] = self.gradient(log_map)[0]
+        return {k: float(v) for k, v in terms.items()}
+
     def reflectance_prior(self, psi, logits) -> float:
         """GMM (Eq. 6) + hue (Eq. 12) prior terms."""
         value = 0.0
@@ -230,6 +243,7 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
             value, _, lik = post.illumination_terms(state.log_map, T, seen, bins)
             total = value + post.reflectance_prior(state.psi, state.logits)
             rows.append({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik,
+                         **post.prior_terms(state.psi, state.logits, state.log_map, bins),
                          "seconds": time.perf_counter() - t0, "unseen_texels": int((~seen).sum())})
             if progress:
                 progress(rows[-1])
@@ -387,10 +401,10 @@ def _light_likelihood(post, theta, phi, log_intensity):
     return lik
 
 
-def _light_block(post, theta, phi, log_intensity):
+def _light_block(post, theta, phi, log_intensity, maxfev=400):
     """Powell's method on (theta, phi, log intensity) with the reflectance fixed."""
     res = minimize(lambda v: _light_likelihood(post, *v), [theta, phi, log_intensity], method="Powell",
-                    options={"xtol": 1e-4, "ftol": 1e-7, "maxfev": 400})
+                   options={"xtol": 1e-4, "ftol": 1e-7, "maxfev": maxfev})
     return tuple(res.x)
 
 
@@ -483,7 +497,7 @@ def recover_light(texels: TexelSum, observed, mask, model, config=Config(), prog
                                           max(cfg.block_iters // 4, 5), fit_scale=True)
             li = float(np.log(Ls[0, 0]))
             post.set_reflectance(p, z)
-            th, ph, li = _light_block(post, th, ph, li)
+            th, ph, li = _light_block(post, th, ph, li, maxfev=100)     # a coarse search: refined later
             post.aim(th, ph)
             value = post.reflectance_terms(p, z, np.full((1, 3), np.exp(li)))[0]
             rows.append({"pass": "light search", "round": len(rows), "neg_log_posterior": value,
@@ -517,7 +531,7 @@ def recover_light(texels: TexelSum, observed, mask, model, config=Config(), prog
         log_i = float(np.log(L[0, 0]))
         total, lik = post.reflectance_terms(psi, logits, L)
         rows.append({"pass": "light", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
-                     "seconds": time.perf_counter() - t0})
+                     **post.prior_terms(psi, logits), "seconds": time.perf_counter() - t0})
         if progress:
             progress(rows[-1])
         if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):

@@ -1,7 +1,9 @@
 """Error measures of the paper, as functions over arrays.
 
 * :func:`log_rmse` — Eq. 5, the log-space BRDF error used both to fit
-  reflectance models to measurements and to report how well they fit.
+  reflectance models to measurements and to report how well they fit;
+* :func:`log_rmse_scale_invariant` — Eq. 20, the same after the best overall
+  scale of the model: what one image under unknown light can determine.
 """
 from __future__ import annotations
 
@@ -33,3 +35,44 @@ def log_rmse(model_values, measured_values, cos_i) -> float:
     if a.shape != b.shape:
         raise ValueError("model and measured values differ in shape: %s vs %s" % (a.shape, b.shape))
     return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
+def log_rmse_scale_invariant(model_values, measured_values, cos_i) -> tuple:
+    """Eq. 20: min over s > 0 of Eq. 5 between s * model and the measurement.
+
+    Under illumination of unknown strength only light x reflectance is
+    observable, so a recovered BRDF is scored up to one overall scale.
+    Returns (error, s). The minimum is found by golden-section search on log s
+    (Eq. 5 of a scaled model is unimodal in log s in practice; the bracket
+    spans 1e-6..1e6).
+    """
+    m = np.asarray(model_values, dtype=np.float64)
+    lo, hi = np.log(1e-6), np.log(1e6)
+    g = (np.sqrt(5) - 1) / 2
+
+    def f(log_s):
+        return log_rmse(m * np.exp(log_s), measured_values, cos_i)
+
+    a, b = lo + (1 - g) * (hi - lo), lo + g * (hi - lo)
+    fa, fb = f(a), f(b)
+    for _ in range(80):
+        if fa < fb:
+            hi, b, fb = b, a, fa
+            a = lo + (1 - g) * (hi - lo)
+            fa = f(a)
+        else:
+            lo, a, fa = a, b, fb
+            b = lo + g * (hi - lo)
+            fb = f(b)
+    log_s = (lo + hi) / 2
+    return f(log_s), float(np.exp(log_s))
+
+
+def material_error(material, samples, scale_invariant=True) -> float:
+    """Eq. 20 (or Eq. 5) of a material (anything with ``.eval(theta_h, theta_d)``,
+    e.g. :class:`~mi_dsbrdf.dsbrdf.Material`) against measured
+    :class:`~mi_dsbrdf.fitting.Samples`."""
+    values = material.eval(samples.theta_h, samples.theta_d)
+    if scale_invariant:
+        return log_rmse_scale_invariant(values, samples.values, samples.cos_i)[0]
+    return log_rmse(values, samples.values, samples.cos_i)

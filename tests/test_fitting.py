@@ -100,3 +100,15 @@ def test_fits_of_stiff_merl_materials_converge(nbrdf_file):
         assert np.all(np.isfinite(m.log_kappa)) and np.all(np.isfinite(m.log_gamma))
         assert np.all(m.log_gamma >= fitting.LOG_GAMMA_BOUNDS[0] - 1e-9)     # no lobe collapses to gamma = 0
         assert np.all(np.diff(m.log_gamma.mean(axis=1)) >= 0)                 # specularity order
+
+
+def test_scale_invariant_error_finds_the_scale_and_ignores_it():
+    from mi_dsbrdf.metrics import log_rmse, log_rmse_scale_invariant
+    rng = np.random.default_rng(0)
+    truth = np.exp(rng.normal(0, 1.5, (500, 3)))
+    cos_i = rng.uniform(0.1, 1.0, 500)
+    err, s = log_rmse_scale_invariant(truth / 7.0, truth, cos_i)
+    assert err < 1e-6 and abs(s - 7.0) < 1e-4
+    noisy = truth * np.exp(rng.normal(0, 0.2, truth.shape))
+    err, s = log_rmse_scale_invariant(noisy * 0.01, truth, cos_i)
+    assert err <= log_rmse(noisy, truth, cos_i) + 1e-9 and err < log_rmse(noisy * 0.01, truth, cos_i)
