@@ -82,7 +82,7 @@ def brdf_error(material, truth) -> float:
     return material_error(material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
 
 
-def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3, iters=20, spp=256,
+def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3, iters=15, spp=256,
         force=False) -> dict:
     import mitsuba as mi
     from . import load_material

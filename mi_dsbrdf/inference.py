@@ -34,6 +34,13 @@ from .priors import EntropyPrior, GradientPrior
 CHROMA_LIMIT = 6.0
 #: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
 BLACK = -30.0
+#: how far (natural log) a recovered kappa/gamma control value may leave the range the
+#: library's materials span at that control point before CURVE_PENALTY applies
+CURVE_MARGIN = 1.0
+#: weight of the squared excess (log units) of a control value beyond that range
+CURVE_PENALTY = 100.0
+#: largest change of the light's log scale in one Levenberg-Marquardt step
+MAX_SCALE_STEP = 5.0
 
 
 @dataclasses.dataclass
@@ -96,6 +103,13 @@ class Posterior:
         else:
             self.refl = _View(texels, obs, keep, 1.0)
         self.point = point          # (centre, distance) of a point light, None: directional
+        # the range of the library's kappa/gamma control values: a recovered curve
+        # stays within CURVE_MARGIN of it (one image sees few theta_d; without this
+        # box the unobserved, grazing end of a curve can run off to kappa = e^85)
+        ctrl = np.stack([model.basis.control_values(model.library_material(n).psi) for n in model.library])
+        self.curve_range = (ctrl.min(axis=0).reshape(-1) - CURVE_MARGIN, ctrl.max(axis=0).reshape(-1) + CURVE_MARGIN)
+        c0 = model.basis.control_values(np.zeros(k)).reshape(-1)      # control values are linear in psi
+        self.curve_map = (c0, np.stack([model.basis.control_values(e).reshape(-1) - c0 for e in np.eye(k)], axis=1))
         self.entropy = EntropyPrior(config.w_entropy)
         self.gradient = GradientPrior(config.w_gradient)
         self._dr = dr
@@ -119,9 +133,9 @@ class Posterior:
         self.params.update()
 
     def prior_terms(self, psi, logits, log_map=None, bins=None) -> dict:
-        """The weighted prior terms one by one, for the log: GMM (Eq. 6), hue (Eq. 12)
-        and, given a map, entropy (Eq. 13-15) and gradient (Eq. 16)."""
-        terms = {}
+        """The weighted prior terms one by one, for the log: the curve penalty, GMM
+        (Eq. 6), hue (Eq. 12) and, given a map, entropy (Eq. 13-15) and gradient (Eq. 16)."""
+        terms = {"curve_penalty": self.curve_penalty(psi)[0]}
         if self.model.gmm is not None:
             terms["gmm"] = self.cfg.w_gmm * self.model.gmm.nll(psi)
         if self.model.hue_prior is not None:
@@ -131,9 +145,20 @@ class Posterior:
             terms["gradient"] = self.gradient(log_map)[0]
         return {k: float(v) for k, v in terms.items()}
 
+    def curve_penalty(self, psi):
+        """(value, gradient, Gauss-Newton Hessian) of CURVE_PENALTY * sum of the squared
+        excess of the kappa/gamma control values beyond ``curve_range``: ψ far from
+        the data can put a curve's unobserved (grazing) end at kappa = e^85."""
+        c0, A = self.curve_map
+        c = c0 + A @ psi
+        excess = np.maximum(c - self.curve_range[1], 0) - np.maximum(self.curve_range[0] - c, 0)
+        active = (excess != 0).astype(np.float64)
+        return (CURVE_PENALTY * float(excess @ excess), 2 * CURVE_PENALTY * A.T @ excess,
+                2 * CURVE_PENALTY * (A.T * active) @ A)
+
     def reflectance_prior(self, psi, logits) -> float:
-        """GMM (Eq. 6) + hue (Eq. 12) prior terms."""
-        value = 0.0
+        """GMM (Eq. 6) + hue (Eq. 12) prior terms, and the curve penalty."""
+        value = self.curve_penalty(psi)[0]
         if self.model.gmm is not None:
             value += self.cfg.w_gmm * self.model.gmm.nll(psi)
         if self.model.hue_prior is not None:
@@ -351,6 +376,9 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
             prec = gm._prec[int(np.argmax(lc[0]))]
             H[:k, :k] += post.cfg.w_gmm * prec
             g[:k] += post.cfg.w_gmm * gm.grad(psi)
+        _, g_curve, h_curve = post.curve_penalty(psi)
+        H[:k, :k] += h_curve
+        g[:k] += g_curve
         if post.model.hue_prior is not None:
             gh = post.cfg.w_hue * post.model.hue_prior.grad(c)
             g[k:k + 2 * R] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
@@ -360,7 +388,7 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
             # chromaticity variables stay within +-CHROMA_LIMIT: a saturated softmax has no gradient left
             p_new = psi + step[:k]
             z_new = np.clip(logits + step[k:k + 2 * R].reshape(R, 2), -CHROMA_LIMIT, CHROMA_LIMIT)
-            sc_new = sc + (step[k + 2 * R] if fit_scale else 0.0)
+            sc_new = sc + (np.clip(step[k + 2 * R], -MAX_SCALE_STEP, MAX_SCALE_STEP) if fit_scale else 0.0)
             ang_new = None if ang is None else ang + step[-2:]
             new = total(p_new, z_new, sc_new, ang_new)
             if np.isfinite(new) and new < cur:

@@ -83,8 +83,8 @@ def prepare_out(path, force) -> None:
     os.makedirs(path, exist_ok=True)
 
 
-def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_size=(16, 32), rounds=4,
-                  iters=40, progress=True) -> dict:
+def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_size=(16, 32), rounds=3,
+                  iters=15, progress=True) -> dict:
     """Run the whole recovery and write the result directory; returns the log dict."""
     import mitsuba as mi
 
