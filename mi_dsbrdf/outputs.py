@@ -27,12 +27,12 @@ def write_scene_xml(scene_file, out_file, material_file, light) -> None:
         props = node.props
         if node.type == mi.ObjectType.BSDF and props.plugin_name() == "dsbrdf":
             for key in list(props.keys()):
-                props.remove_property(key)
+                del props[key]
             props["filename"] = os.path.relpath(material_file, os.path.dirname(os.path.abspath(out_file)))
         elif node.type == mi.ObjectType.Emitter:
             for key in list(props.keys()):
                 if key != "to_world" or light["type"] != "envmap":
-                    props.remove_property(key)
+                    del props[key]
             props.set_plugin_name(light["type"])
             if light["type"] == "envmap":
                 props["filename"] = os.path.relpath(light["filename"], os.path.dirname(os.path.abspath(out_file)))
