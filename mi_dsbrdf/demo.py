@@ -57,9 +57,9 @@ def latlong_of(emitter_dict, height=16, width=32, samples=1 << 20, seed=0) -> np
     return (acc / samples).reshape(height, width, 3) / texel_solid_angles(height, width)[..., None]
 
 
-def scene_xml(res, envmap, material=None) -> str:
-    bsdf = ('<bsdf type="dsbrdf"><string name="material" value="%s"/></bsdf>' % material
-            if material else '<bsdf type="dsbrdf"/>')
+def scene_xml(res, envmap) -> str:
+    """The recovery scene: :func:`~mi_dsbrdf.scenes.camera` (fov 32), a sphere with
+    a bare ``dsbrdf`` and an envmap whose file only stands in for the unknown light."""
     return """<scene version="3.0.0">
     <integrator type="direct"/>
     <sensor type="perspective">
@@ -68,10 +68,10 @@ def scene_xml(res, envmap, material=None) -> str:
         <film type="hdrfilm"><integer name="width" value="%d"/><integer name="height" value="%d"/>
             <rfilter type="box"/></film>
     </sensor>
-    <shape type="sphere">%s</shape>
+    <shape type="sphere"><bsdf type="dsbrdf"/></shape>
     <emitter type="envmap"><string name="filename" value="%s"/></emitter>
 </scene>
-""" % (res, res, bsdf, envmap)
+""" % (res, res, envmap)
 
 
 def brdf_error(material, truth) -> float:
@@ -90,16 +90,13 @@ def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3
     from .model_data import shipped_model
     from .pipeline import prepare_out, recover_files
     from .render import save_preview
+    from .scenes import camera
     prepare_out(out, force)
     t0 = time.perf_counter()
     # 1. the observed image
-    truth_xml = os.path.join(out, "truth_scene.xml")
-    with open(truth_xml, "w") as f:
-        f.write(scene_xml(res, "placeholder.exr", material))
     write_exr(os.path.join(out, "placeholder.exr"), np.ones((8, 16, 3), dtype=np.float32))
-    truth_scene = mi.load_file(truth_xml)
-    params = {"type": "scene", "integrator": {"type": "direct"}, "sky": sunsky(SUN),
-              "sensor": truth_scene.sensors()[0], "object": truth_scene.shapes()[0]}
+    params = {"type": "scene", "integrator": {"type": "direct"}, "sky": sunsky(SUN), "sensor": camera(res, 32),
+              "object": {"type": "sphere", "bsdf": {"type": "dsbrdf", "material": material}}}
     image = np.array(mi.render(mi.load_dict(params), spp=spp, seed=0), dtype=np.float32)
     write_exr(os.path.join(out, "observed.exr"), image)
     # 2. recovery

@@ -100,7 +100,6 @@ class TexelSum:
         sub.visibility = None if self.visibility is None else self.visibility[rows]
         if self.light_position is not None:
             sub.directions, sub.solid_angles = self.directions[rows], self.solid_angles[rows]
-        sub._rows = rows
         return sub
 
     @property
@@ -225,6 +224,13 @@ def apply_transport(T, illumination) -> np.ndarray:
     channel-major transport ``T`` (3, P, T) of :meth:`TexelSum.transport`."""
     L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
     return np.stack([T[c] @ L[:, c] for c in range(3)], axis=1).astype(np.float64)
+
+
+def transport_adjoint(T, grad_pixels) -> np.ndarray:
+    """(T texels, 3) float64: d loss / d L from d loss / d radiance ``grad_pixels``
+    (P, 3), the transpose of :func:`apply_transport`."""
+    g = np.asarray(grad_pixels, dtype=np.float32).reshape(-1, 3)
+    return np.stack([g[:, c] @ T[c] for c in range(3)], axis=1).astype(np.float64)
 
 
 def unseen_texels(transport, threshold=1e-6) -> np.ndarray:

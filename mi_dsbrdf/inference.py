@@ -7,15 +7,21 @@ and the log illumination map x = log L is minimised by alternating two blocks:
   :class:`~mi_dsbrdf.forward.TexelSum`), so each evaluation is a product with T;
   L-BFGS-B on x with the likelihood (Eq. 19) and the entropy and gradient priors
   (Eq. 13-16). Texels no observed pixel sees are masked and left black.
-* reflectance: illumination fixed; L-BFGS-B on (psi, chromaticity variables)
-  with the likelihood, whose gradient Dr.Jit differentiates through the
-  ``dsbrdf`` plugin, and the GMM and hue priors (Eq. 6, 12).
+* reflectance: illumination fixed; Levenberg-Marquardt with reweighted
+  residuals (:func:`_reflectance_block`) on (psi, chromaticity variables, the
+  light's log scale), its Jacobian by forward-mode AD through the ``dsbrdf``
+  plugin, with the GMM and hue priors (Eq. 6, 12) and a penalty on curves
+  beyond the library's range.
 
-Start: psi = 0, random chromaticity (seeded), constant illumination. Rounds of
-the two blocks continue until the negative log posterior changes by less than
-``tol`` (relative). Two passes: grey illumination first (one map shared by the
-channels: the grey-world assumption), then colour from that start, unless the
-image is grey (:mod:`mi_dsbrdf.scene_needs` decides).
+Start: random chromaticity (seeded) and, for each of :func:`reflectance_starts`
+(psi = 0 and the GMM means), a constant map at the image's level refined by a
+short grey illumination block and a short reflectance block; the best starts
+the rounds. Rounds of the two blocks continue until the negative log posterior
+changes by less than ``tol`` (relative). Two passes: grey illumination first
+(one map shared by the channels: the grey-world assumption), then colour from
+that start, unless the image is grey (:mod:`mi_dsbrdf.scene_needs` decides).
+A point or directional light (:func:`recover_light`) replaces the illumination
+block by Powell's method on its direction and intensity.
 """
 from __future__ import annotations
 
@@ -26,7 +32,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from .fitting import chroma_logits, softmax_chroma
-from .forward import TexelSum, apply_transport, unseen_texels
+from .forward import TexelSum, apply_transport, transport_adjoint, unseen_texels
 from .posterior import LOG_OFFSET, log_likelihood_terms
 from .priors import EntropyPrior, GradientPrior
 
@@ -158,12 +164,7 @@ class Posterior:
 
     def reflectance_prior(self, psi, logits) -> float:
         """GMM (Eq. 6) + hue (Eq. 12) prior terms, and the curve penalty."""
-        value = self.curve_penalty(psi)[0]
-        if self.model.gmm is not None:
-            value += self.cfg.w_gmm * self.model.gmm.nll(psi)
-        if self.model.hue_prior is not None:
-            value += self.cfg.w_hue * self.model.hue_prior.nll(softmax_chroma(logits))
-        return value
+        return sum(self.prior_terms(psi, logits).values())
 
     def reflectance_terms(self, psi, logits, L):
         """(value, likelihood) of likelihood + GMM + hue priors at fixed L, the
@@ -185,9 +186,7 @@ class Posterior:
         image = apply_transport(T, L)
         lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
                                           self.offset, self.scale)
-        gi = g_img[:, 0, :].astype(np.float32)
-        g_L = np.stack([gi[:, c] @ T[c] for c in range(3)], axis=1).astype(np.float64).reshape(log_map.shape)
-        g = g_L * L
+        g = transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * L
         e, ge = self.entropy(log_map, bins)
         s, gs = self.gradient(log_map)
         return lik + e + s, g + ge + gs, lik
@@ -246,7 +245,6 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
     _, state.psi, state.logits, state.log_map = best
     post.set_reflectance(state.psi, state.logits)
     T = texels.transport()
-    seen = ~unseen_texels(T).reshape(H, W)
     passes = ["grey", "colour"] if colour else ["grey"]
     for pass_name in passes:
         prev = None

@@ -56,6 +56,7 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
     import mitsuba as mi
     from .illumination import procedural_sky
     from .render import save_preview
+    from .scenes import camera
     lights = [{"type": "directional", "direction": [0.5, -0.6, -0.62], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "directional", "direction": [-1.0, -0.3, 0.1], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "envmap", "bitmap": mi.Bitmap(procedural_sky(64, 128))}]
@@ -63,9 +64,7 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
     for light in lights:
         scene = mi.load_dict({
             "type": "scene", "integrator": {"type": "direct"},
-            "sensor": {"type": "perspective", "fov": 30,
-                       "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
-                       "film": {"type": "hdrfilm", "width": res, "height": res}},
+            "sensor": camera(res, 30, box_filter=False),
             "object": {"type": "sphere", "bsdf": {"type": "dsbrdf", "filename": os.path.abspath(material_file)}},
             "light": light})
         tiles.append(np.array(mi.render(scene, spp=spp, seed=0), dtype=np.float32))

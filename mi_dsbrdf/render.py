@@ -48,7 +48,7 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
     import mitsuba as mi
     from .errors import MiDsbrdfError
     from .library import library_names
-    from .scenes import SCENE_DIR
+    from .scenes import SCENE_DIR, camera
     bsdf = {"type": "dsbrdf"}
     if os.path.exists(os.fspath(material_file)):
         bsdf["filename"] = os.path.abspath(os.fspath(material_file))
@@ -69,9 +69,7 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
     obj["bsdf"] = bsdf
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "path", "max_depth": 4},
-        "sensor": {"type": "perspective", "fov": 32,
-                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": res, "height": res}},
+        "sensor": camera(res, 32, box_filter=False),
         "object": obj, "emitter": {"type": "envmap", "filename": os.path.abspath(os.fspath(envmap_file))}})
     t0 = time.perf_counter()
     img = np.array(mi.render(scene, spp=spp), dtype=np.float32)

@@ -18,16 +18,24 @@ SCENES = {
 }
 
 
-def sphere_scene(bsdf: dict, res: int = 24, fov: float = 30.0):
-    """A unit sphere with ``bsdf`` seen by a perspective camera at distance 4 on
-    +z (res x res box-filtered film), no light: a small scene for the texel-sum
-    forward model (:mod:`mi_dsbrdf.forward`), which brings its own."""
+def camera(res: int, fov: float = 30.0, box_filter: bool = True) -> dict:
+    """The shipped scenes' camera as a Mitsuba dict: perspective, at distance 4
+    on +z looking at the origin, a res x res film (box filter: one pixel, one
+    footprint, as the texel-sum forward model assumes)."""
     import mitsuba as mi
-    return mi.load_dict({"type": "scene", "sensor": {
-        "type": "perspective", "fov": fov,
-        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
-        "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},
-        "object": {"type": "sphere", "bsdf": bsdf}})
+    film = {"type": "hdrfilm", "width": res, "height": res}
+    if box_filter:
+        film["rfilter"] = {"type": "box"}
+    return {"type": "perspective", "fov": fov,
+            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+            "film": film}
+
+
+def sphere_scene(bsdf: dict, res: int = 24, fov: float = 30.0):
+    """A unit sphere with ``bsdf`` seen by :func:`camera`, no light: a small scene
+    for the texel-sum forward model (:mod:`mi_dsbrdf.forward`), which brings its own."""
+    import mitsuba as mi
+    return mi.load_dict({"type": "scene", "sensor": camera(res, fov), "object": {"type": "sphere", "bsdf": bsdf}})
 
 
 def scene_path(name_or_path: str) -> str:
