@@ -1,0 +1,273 @@
+"""Synthetic experiments with known truth (paper §6): one case, run and scored.
+
+A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
+
+    {"id": "point-chrome-60-priors", "kind": "point" | "probe", "material": MERL name,
+     "angle": degrees from the viewer (point), "probe": "probulator/grace.hdr" (probe),
+     "priors": bool, "shape": "sphere" | "torus", "res": pixels, "map": [H, W],
+     "rounds": int, "iters": int, "method": "dsbrdf" | "dsbrdf-adam" | "principled-adam",
+     "spp": samples per pixel (Adam methods)}
+
+:func:`run_case` renders the truth with the measured material (the ``merl``
+plugin evaluated by the texel-sum forward model; a probe at twice the
+recovered map's resolution, a point light at distance 5 with intensity 40),
+recovers it with a leave-one-out model (:func:`loo_model`: the material's own
+fit is left out of bases and priors) and scores it:
+
+* ``brdf_eq20``: Eq. 20 on the MERL grid (scale-invariant), for every case;
+* ``brdf_eq5``: Eq. 5 with the known light scale (point lights: the BRDF
+  times recovered / true intensity);
+* ``direction_error_deg`` (point lights);
+* ``illumination_error``: relative RMSE of the seen texels after the best
+  scale (probes, :func:`illumination_error`);
+* ``relight_error``: scale-invariant log-RMSE (:func:`image_error`) of the
+  recovered material relit under two other probes against the measured
+  material under them (paper Fig. 9); the images are returned for the report;
+* ``trace``: the negative log posterior of every logged round, ``rounds``,
+  ``seconds``, and ``finite`` (no NaN/Inf anywhere in the result).
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+
+#: probes used for relighting (the first two that differ from the case's probe)
+RELIGHT_PROBES = ["probulator/pisa.hdr", "probulator/uffizi.hdr", "probulator/ennis.hdr"]
+#: point light of the point cases: distance from the object's centre, intensity (W/sr)
+POINT_DISTANCE, POINT_INTENSITY = 5.0, 40.0
+NO_PRIORS = dict(w_gmm=0.0, w_hue=0.0, w_entropy=0.0, w_gradient=0.0)
+
+
+# --- scenes and truth ---------------------------------------------------------------
+
+def light_at(angle_deg) -> np.ndarray:
+    """Unit direction at ``angle_deg`` from the viewer (+z), tilted up and to the side."""
+    a = math.radians(angle_deg)
+    d = np.array([math.sin(a) * 0.8, math.sin(a) * 0.6, math.cos(a)])
+    return d / np.linalg.norm(d)
+
+
+def downsample(env, height, width) -> np.ndarray:
+    """Box-filter an (h, w, 3) lat-long map to (height, width, 3) (h, w multiples of it after cropping)."""
+    h, w = env.shape[:2]
+    e = env[:h - h % height, :w - w % width, :3]
+    return e.reshape(height, e.shape[0] // height, width, e.shape[1] // width, 3).mean(axis=(1, 3))
+
+
+def texels(bsdf: dict, res: int, map_hw=(1, 1), shape="sphere"):
+    """A :class:`~mi_dsbrdf.forward.TexelSum` of ``shape`` (sphere, or the shipped
+    non-convex torus, then with shadow rays) carrying ``bsdf``, seen by the shipped camera."""
+    import mitsuba as mi
+    from .forward import TexelSum
+    from .scenes import SCENE_DIR, camera
+    if shape == "sphere":
+        obj = {"type": "sphere", "bsdf": bsdf}
+    elif shape == "torus":
+        obj = {"type": "ply", "filename": os.path.join(SCENE_DIR, "meshes", "torus.ply"), "bsdf": bsdf}
+    else:
+        raise ValueError("shape must be sphere or torus, got %r" % (shape,))
+    scene = mi.load_dict({"type": "scene", "sensor": camera(res), "object": obj})
+    return TexelSum(scene, scene.shapes()[0], tuple(map_hw), visibility=shape != "sphere")
+
+
+def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
+    """(H, W, 3) image of a TexelSum under a map (T, 3) (``illumination``) or one
+    light: ``direction`` (irradiance 3) or ``point`` position (intensity 40)."""
+    if point is not None:
+        ts.set_point(point)
+        illumination = np.full((1, 3), POINT_INTENSITY)
+    elif direction is not None:
+        ts.set_directions(np.asarray(direction)[None], [1.0])
+        illumination = np.full((1, 3), 3.0)
+    h, w = ts.image_size
+    img = np.zeros((h * w, 3))
+    img[ts.pixels] = ts.render(np.asarray(illumination).reshape(-1, 3))
+    return img.reshape(h, w, 3)
+
+
+def read_probe(path) -> np.ndarray:
+    import mitsuba as mi
+    return np.array(mi.Bitmap(os.fspath(path)), dtype=np.float64)[..., :3]
+
+
+def loo_model(name, cache):
+    """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
+    library from the other 99 fits; cached as ``cache/loo-<name>.npz``)."""
+    from . import model_data
+    from .build_model import build_from_fits, save_model
+    path = os.path.join(cache, "loo-%s.npz" % name)
+    if not os.path.exists(path):
+        a = model_data.shipped_model().arrays
+        fits = {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
+                "error": a["fit_error"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
+        os.makedirs(cache, exist_ok=True)
+        tmp = "%s.%d.npz" % (path[:-4], os.getpid())
+        save_model(tmp, build_from_fits(fits, exclude=[name], refit=False, progress=False))
+        os.replace(tmp, path)            # atomic: parallel workers may build the same model
+    return model_data.load_model(path)
+
+
+def specularity(name) -> float:
+    """gamma of the most specular lobe of the material's DSBRDF fit at theta_d = 0
+    (the x axis of paper Fig. 8)."""
+    from . import model_data
+    m = model_data.shipped_model().library_material(name)
+    return float(np.exp(m.log_gamma[:, 0]).max())
+
+
+# --- metrics ------------------------------------------------------------------------
+
+def direction_error_deg(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    c = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+def illumination_error(recovered, truth, seen) -> float:
+    """Relative RMSE ||s R - T|| / ||T|| over the ``seen`` texels (H, W) after the
+    best scale s (the map's scale trades off against the material's)."""
+    r = np.asarray(recovered, np.float64)[seen].reshape(-1)
+    t = np.asarray(truth, np.float64)[seen].reshape(-1)
+    s = float(r @ t / max(r @ r, 1e-300))
+    return float(np.linalg.norm(s * r - t) / max(np.linalg.norm(t), 1e-300))
+
+
+def image_error(image, truth, mask) -> float:
+    """Scale-invariant log-RMSE of two renders over ``mask`` (H, W): Eq. 20's
+    measure on pixels, log(1 + v / mean(truth)) after the best scale of ``image``."""
+    from .metrics import log_rmse_scale_invariant
+    t = np.asarray(truth, np.float64)[mask]
+    ref = max(float(t.mean()), 1e-300)
+    return log_rmse_scale_invariant(np.asarray(image, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]))[0]
+
+
+def bsdf_values(bsdf, samples) -> np.ndarray:
+    """(N, 3) BRDF values (1/sr) of any Mitsuba BSDF at the angles of MERL
+    :class:`~mi_dsbrdf.fitting.Samples` (eval / cos theta_o): scores baselines on
+    the same grid as the DSBRDF."""
+    import drjit as dr
+    import mitsuba as mi
+    from .angles import from_half_diff
+    wi, wo = from_half_diff(samples.theta_h, samples.theta_d, samples.phi_d)
+    n = samples.theta_h.shape[0]
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(*(np.asarray(c, np.float32) for c in wi))
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    si.n = mi.Normal3f(0, 0, 1)
+    v = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(np.asarray(c, np.float32) for c in wo)))
+    return np.array(v, dtype=np.float64).T.reshape(n, 3) / np.asarray(wo[2], np.float64)[:, None]
+
+
+def dsbrdf_bsdf(material):
+    """The ``dsbrdf`` plugin instance of a :class:`~mi_dsbrdf.dsbrdf.Material`."""
+    import mitsuba as mi
+    props = {"type": "dsbrdf", "lobes": int(material.n_lobes)}
+    for r in range(material.n_lobes):
+        for key, values in (("kappa", np.exp(material.log_kappa[r])), ("gamma", np.exp(material.log_gamma[r])),
+                            ("chromaticity", material.chromaticity[r])):
+            props["%s_%d" % (key, r)] = " ".join(repr(float(v)) for v in values)
+    return mi.load_dict(props)
+
+
+# --- one case -----------------------------------------------------------------------
+
+def _finite(x) -> bool:
+    if isinstance(x, dict):
+        return all(_finite(v) for v in x.values())
+    if isinstance(x, (list, tuple)):
+        return all(_finite(v) for v in x)
+    if isinstance(x, np.ndarray):
+        return bool(np.all(np.isfinite(x)))
+    if isinstance(x, float):
+        return math.isfinite(x)
+    return True
+
+
+def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
+    """Render, recover and score one case (see the module doc). ``data``: the
+    folder holding ``merl/merl_nbrdf_weights.npz`` and ``envmaps/``; ``cache``:
+    where leave-one-out models are kept; ``threads``: Dr.Jit's thread count (0:
+    leave it). Returns a JSON-ready dict, plus numpy ``images`` for the report."""
+    import drjit as dr
+    from . import inference
+    from .dsbrdf import Material
+    from .fitting import samples_from_table
+    from .measured import MeasuredBRDF
+    from .metrics import log_rmse, log_rmse_scale_invariant
+    if threads:
+        dr.set_thread_count(threads)
+    nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
+    name = case["material"]
+    res, (H, W) = case["res"], case.get("map", (16, 32))
+    model = loo_model(name, cache)
+    samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, name))
+    merl = {"type": "merl", "nbrdf": nbrdf, "material": name}
+    shape = case.get("shape", "sphere")
+    method = case.get("method", "dsbrdf")
+    weights = {} if case.get("priors", True) else NO_PRIORS
+    cfg = inference.Config(map_size=(H, W), max_rounds=case.get("rounds", 3), block_iters=case.get("iters", 15),
+                           **weights)
+    out = {"case": case, "specularity": specularity(name)}
+    t0 = time.perf_counter()
+    if case["kind"] == "point":
+        d_true = light_at(case["angle"])
+        ts = texels(merl, res, shape=shape)
+        img = render(ts, point=POINT_DISTANCE * d_true)
+        ts = texels({"type": "dsbrdf"}, res, shape=shape)
+        result, rows = inference.recover_light(ts, img, ts.mask, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
+        out["seconds"] = time.perf_counter() - t0
+        material = Material.from_basis(model.basis, result["psi"], result["chromaticity"])
+        values = material.eval(samples.theta_h, samples.theta_d)
+        out["direction_error_deg"] = direction_error_deg(result["direction"], d_true)
+        out["intensity_ratio"] = result["intensity"] / POINT_INTENSITY
+        out["brdf_eq5"] = log_rmse(values * out["intensity_ratio"], samples.values, samples.cos_i)
+    else:
+        probe = read_probe(os.path.join(data, "envmaps", case["probe"]))
+        truth = downsample(probe, 2 * H, 2 * W)
+        ts = texels(merl, res, (2 * H, 2 * W), shape=shape)
+        img = render(ts, truth.reshape(-1, 3))
+        if method == "dsbrdf":
+            ts = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)
+            state, rows = inference.recover(ts, img, ts.mask, model, cfg)
+            out["seconds"] = time.perf_counter() - t0
+            material = Material.from_basis(model.basis, state.psi, state.chromaticity)
+            values = material.eval(samples.theta_h, samples.theta_d)
+            seen = state.log_map[..., 0] > inference.BLACK
+            recovered_map = np.where(seen[..., None], np.exp(state.log_map), 0.0)
+        else:
+            from .adam_inverse import adam_recover
+            fit = adam_recover(img, ts.mask, res, (H, W), method, model, spp=case.get("spp", 16),
+                               iters=case.get("iters", 100), shape=shape, seed=0)
+            out["seconds"] = time.perf_counter() - t0
+            rows, material, recovered_map = fit["rows"], fit["bsdf"], fit["map"]
+            values = bsdf_values(material, samples) if method == "principled-adam" else \
+                material.eval(samples.theta_h, samples.theta_d)
+            seen = np.ones((H, W), bool)
+        out["illumination_error"] = illumination_error(recovered_map, downsample(truth, H, W), seen)
+    out["brdf_eq20"] = log_rmse_scale_invariant(values, samples.values, samples.cos_i)[0]
+    out["trace"] = [float(r["neg_log_posterior"]) for r in rows]
+    out["rounds"] = len(rows)
+    out["relight"], images = _relight(case, material, merl, data)
+    out["finite"] = _finite(out)
+    out["images"] = images
+    return out
+
+
+def _relight(case, material, merl, data, res=48, map_hw=(16, 32)):
+    """Relit image errors under two probes other than the case's, and the images
+    (truth, recovered) for the report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
+    probes = [p for p in RELIGHT_PROBES if p != case.get("probe")][:2]
+    bsdf = dsbrdf_bsdf(material) if hasattr(material, "log_kappa") else material
+    errors, images = {}, {}
+    truth_ts = texels(merl, res, map_hw)
+    ts = texels(bsdf, res, map_hw)
+    for p in probes:
+        L = downsample(read_probe(os.path.join(data, "envmaps", p)), *map_hw).reshape(-1, 3)
+        a, b = render(truth_ts, L), render(ts, L)
+        key = os.path.splitext(os.path.basename(p))[0]
+        errors[key] = image_error(b, a, truth_ts.mask)
+        images[key] = np.stack([a, b]).astype(np.float16)
+    return errors, images
