@@ -22,7 +22,8 @@ fit is left out of bases and priors) and scores it:
   scale (probes, :func:`illumination_error`);
 * ``relight_error``: scale-invariant log-RMSE (:func:`image_error`) of the
   recovered material relit under two other probes against the measured
-  material under them (paper Fig. 9); the images are returned for the report;
+  material under them (paper Fig. 9); the images (truth, recovered at its
+  best scale; in units of the truth's mean) are returned for the report;
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
   ``seconds``, and ``finite`` (no NaN/Inf anywhere in the result).
 """
@@ -269,5 +270,8 @@ def _relight(case, material, merl, data, res=48, map_hw=(16, 32)):
         a, b = render(truth_ts, L), render(ts, L)
         key = os.path.splitext(os.path.basename(p))[0]
         errors[key] = image_error(b, a, truth_ts.mask)
-        images[key] = np.stack([a, b]).astype(np.float16)
+        # stored in units of the truth's mean, the recovered image at its best scale (float16 range)
+        ref = max(float(a[truth_ts.mask].mean()), 1e-300)
+        s = float((a * b).sum() / max((b * b).sum(), 1e-300))
+        images[key] = np.clip(np.stack([a, s * b]) / ref, 0, 6e4).astype(np.float16)
     return errors, images

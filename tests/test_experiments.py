@@ -1,0 +1,95 @@
+"""The experiment runner (benchmarks/experiments.py), one case at a time
+(mi_dsbrdf.evaluation), the Adam baseline and the report, on tiny cases."""
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import data_path
+from mi_dsbrdf import evaluation as ev
+from mi_dsbrdf import model_data
+from mi_dsbrdf.fitting import samples_from_function
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
+
+
+def tiny(case):
+    case.update(res=24, map=[8, 16], rounds=1, iters=3)
+    return case
+
+
+@pytest.fixture(scope="module")
+def data():
+    data_path("merl", "merl_nbrdf_weights.npz")
+    data_path("envmaps", "probulator", "grace.hdr")
+    return os.path.dirname(data_path("merl"))
+
+
+def test_metrics_are_scale_invariant_and_detect_errors():
+    rng = np.random.default_rng(0)
+    t = rng.random((8, 16, 3)) + 0.1
+    seen = np.ones((8, 16), bool)
+    assert ev.illumination_error(7.0 * t, t, seen) < 1e-12
+    assert ev.illumination_error(t + rng.random(t.shape), t, seen) > 0.1
+    mask = seen
+    assert ev.image_error(0.3 * t, t, mask) < 1e-6
+    assert ev.image_error(t ** 2, t, mask) > 0.05
+    assert abs(ev.direction_error_deg([1, 0, 0], [1, 1, 0]) - 45.0) < 1e-9
+
+
+def test_bsdf_values_of_the_plugin_match_the_material():
+    m = model_data.shipped_model().library_material("gold-metallic-paint")
+    s = samples_from_function(lambda th, td, pd: m.eval(th, td))
+    v = ev.bsdf_values(ev.dsbrdf_bsdf(m), s)
+    assert np.max(np.abs(v / s.values - 1)) < 1e-3
+
+
+def test_adam_baseline_lowers_its_loss():
+    from mi_dsbrdf.adam_inverse import adam_recover
+    from mi_dsbrdf.illumination import procedural_sky
+    ts = ev.texels({"type": "dsbrdf", "material": "gold-metallic-paint"}, 24, (16, 32))
+    img = ev.render(ts, procedural_sky(16, 32).reshape(-1, 3))
+    fit = adam_recover(img, ts.mask, 24, (8, 16), "principled-adam", spp=4, iters=20)
+    loss = [r["neg_log_posterior"] for r in fit["rows"]]
+    assert np.all(np.isfinite(loss)) and np.mean(loss[-5:]) < 0.7 * np.mean(loss[:3])
+    assert fit["map"].shape == (8, 16, 3) and np.all(fit["map"] > 0)
+    with pytest.raises(ValueError, match="method"):
+        adam_recover(img, ts.mask, 24, (8, 16), "nonsense")
+
+
+def test_run_case_scores_a_point_light(data, tmp_path):
+    case = tiny({"id": "t", "kind": "point", "material": "gold-metallic-paint", "angle": 40, "priors": True})
+    r = ev.run_case(case, data, str(tmp_path / "cache"))
+    assert r["finite"] and r["direction_error_deg"] < 10
+    assert 0 < r["brdf_eq20"] < 2 and r["brdf_eq5"] >= r["brdf_eq20"] - 1e-9
+    assert set(r["relight"]) == {"pisa", "uffizi"}
+    assert r["images"]["pisa"].shape == (2, 48, 48, 3)
+    assert os.path.exists(tmp_path / "cache" / "loo-gold-metallic-paint.npz")
+
+
+def test_runner_is_resumable_and_the_report_is_written(data, tmp_path):
+    from dask.distributed import Client
+    import experiments
+    import experiments_report
+    todo = [tiny(c) for c in experiments.cases(materials=["gold-metallic-paint"])
+            if c["id"] in ("point-dsbrdf-gold-metallic-paint-sphere-30deg-priors",
+                           "point-dsbrdf-gold-metallic-paint-sphere-30deg-nopriors",
+                           "probe-dsbrdf-gold-metallic-paint-sphere-grace-priors")]
+    assert len(todo) == 3
+    out = str(tmp_path / "results")
+    with Client(processes=False, n_workers=1, threads_per_worker=2, dashboard_address=None) as client:
+        s = experiments.run_cases(todo, client, out, data, str(tmp_path / "cache"), threads=0, log=lambda *a: None)
+        assert len(s["done"]) == 3 and not s["failed"]
+        again = experiments.run_cases(todo, client, out, data, str(tmp_path / "cache"), threads=0,
+                                      log=lambda *a: None)
+    assert again["skipped"] == 3 and not again["done"]
+    r = json.load(open(os.path.join(out, todo[2]["id"] + ".json")))
+    assert r["finite"] and 0 <= r["illumination_error"] and r["rounds"] >= 2
+    docs = tmp_path / "docs"
+    experiments_report.write_report(out, str(docs))
+    md = (docs / "experiments.md").read_text()
+    assert "gold-metallic-paint" in md and "fig7_priors.png" in md
+    for name in ("fig5_sorted_error.png", "fig6_direction_error.png", "fig7_priors.png", "fig9_relighting.png"):
+        assert (docs / "experiments" / name).stat().st_size > 1000
