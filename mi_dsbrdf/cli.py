@@ -125,7 +125,7 @@ def main(argv=None):
     p.add_argument("--image", required=True, help="observed HDR image (EXR/HDR), film-sized")
     p.add_argument("--mask", default=None, help="optional mask image (white = use)")
     p.add_argument("--out", required=True, help="result directory")
-    p.add_argument("--map-size", default=(16, 32), type=_map_size, help="illumination map HxW (default 16x32)")
+    p.add_argument("--map-size", default=(32, 64), type=_map_size, help="illumination map HxW (default 32x64, the benchmarked size)")
     p.add_argument("--rounds", type=int, default=3, help="rounds of alternating blocks per pass (default 3)")
     p.add_argument("--iters", type=int, default=15, help="Levenberg-Marquardt iterations per reflectance block (default 15)")
     p.add_argument("--force", action="store_true", help="write into an existing non-empty directory")

@@ -83,7 +83,7 @@ def prepare_out(path, force) -> None:
     os.makedirs(path, exist_ok=True)
 
 
-def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_size=(16, 32), rounds=3,
+def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_size=(32, 64), rounds=3,
                   iters=15, progress=True) -> dict:
     """Run the whole recovery and write the result directory; returns the log dict."""
     import mitsuba as mi
