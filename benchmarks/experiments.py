@@ -50,8 +50,9 @@ def _case(group, kind, material, priors=True, **kw) -> dict:
     tag = [group, c["method"], material, c["shape"]]
     tag += ["%ddeg" % c["angle"]] if kind == "point" else [os.path.splitext(os.path.basename(c["probe"]))[0]]
     if group == "budget":
-        tag += ["%dx%d" % tuple(c["map"]), "r%d" % c["rounds"], "i%d" % c["iters"]]
-        tag += ["spp%d" % c["spp"]] if "spp" in c else []
+        tag += ["%dx%d" % tuple(c["map"])]
+        tag += ["r%d" % c["rounds"], "i%d" % c["iters"]] if c["method"] == "dsbrdf" else \
+            ["i%d" % c["iters"], "spp%d" % c["spp"]]
     tag += ["priors" if priors else "nopriors"]
     c["id"] = "-".join(tag)
     return c

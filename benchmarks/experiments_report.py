@@ -62,9 +62,10 @@ def write_report(results_dir, docs_dir) -> str:
               rs[0]["case"]["res"] if rs else 64),
           "and recovers it with a reflectance model that never saw it (leave-one-out bases and priors).",
           "Eq. 20 is the BRDF's log-RMSE on the MERL grid after the best overall scale; Eq. 5 uses the",
-          "known light intensity instead. Illumination error: relative RMSE of the seen texels after the",
-          "best scale. Relit error: Eq. 20's measure on the pixels of the material relit under two other",
-          "probes against the measured material under them.", ""]
+          "known light intensity instead. Illumination error: the same log-RMSE after the best scale on the",
+          "texels of the recovered map that a pixel sees, against the probe at that resolution. Relit",
+          "error: that measure on the pixels of the material relit under two other probes (32×64 maps)",
+          "against the measured material under them.", ""]
 
     # --- summary -------------------------------------------------------------------
     md += ["## Summary", "", "| cases | n | direction error (median / max) | Eq. 5 | Eq. 20 | illumination | relit |",
@@ -152,7 +153,7 @@ def write_report(results_dir, docs_dir) -> str:
             ax.annotate(_label(r), (r["specularity"], r["illumination_error"]), fontsize=6)
         ax.set_xscale("log")
         ax.set_xlabel("γ of the most specular lobe (θd = 0)")
-        ax.set_ylabel("illumination error after best scale")
+        ax.set_ylabel("illumination error (log-RMSE, best scale)")
         fig.tight_layout()
         fig.savefig(os.path.join(fig_dir, "fig8_illumination_vs_specularity.png"), dpi=110)
         plt.close(fig)
@@ -199,8 +200,12 @@ def write_report(results_dir, docs_dir) -> str:
                         label=method)
         axes[0].set_ylabel("BRDF error, Eq. 20")
         axes[1].set_ylabel("illumination error")
+        from matplotlib.ticker import ScalarFormatter
         for ax in axes:
             ax.set_xscale("log")
+            ax.xaxis.set_major_formatter(ScalarFormatter())
+            ax.xaxis.set_minor_formatter(ScalarFormatter())
+            ax.tick_params(axis="x", which="minor", labelsize=7)
             ax.set_xlabel("wall time (s), one core")
             ax.legend(fontsize=8)
         fig.suptitle("%s under %s" % (sel[0]["case"]["material"], os.path.basename(sel[0]["case"]["probe"])))

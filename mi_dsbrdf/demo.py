@@ -87,6 +87,7 @@ def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3
     import mitsuba as mi
     from . import load_material
     from .illumination import write_exr
+    from .evaluation import scale_invariant_log_error
     from .model_data import shipped_model
     from .pipeline import prepare_out, recover_files
     from .render import save_preview
@@ -113,8 +114,6 @@ def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3
     sky_found = mi.Bitmap(os.path.join(rec, "illumination.exr"))
     sky_found = np.array(sky_found, dtype=np.float64)[..., :3]
     seen = sky_found.mean(axis=2) > 0
-    scale = np.median(sky_truth[seen] / np.maximum(sky_found[seen], 1e-30))
-    r = np.log(sky_found[seen] * scale + 1e-6) - np.log(sky_truth[seen] + 1e-6)
     relit = []
     for name in ("truth", "recovered"):
         bsdf = ({"type": "dsbrdf", "material": material} if name == "truth"
@@ -123,16 +122,14 @@ def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3
         relit.append(np.array(mi.render(mi.load_dict(p), spp=spp, seed=1), dtype=np.float64))
     lit = relit[0].mean(axis=2) > 1e-2 * relit[0].mean()
     scale_img = np.median(relit[0][lit] / np.maximum(relit[1][lit], 1e-30))
-    eps = 1e-3 * relit[0][lit].mean()                         # the likelihood's log offset (Eq. 19)
-    relit_err = float(np.sqrt(np.mean((np.log(relit[1][lit] * scale_img + eps) - np.log(relit[0][lit] + eps)) ** 2)))
     save_preview(np.concatenate([image, relit[0].astype(np.float32), (relit[1] * scale_img).astype(np.float32)],
                                 axis=1), os.path.join(out, "comparison.png"))
     report = {"material": material, "image": [res, res], "map_size": list(map_size),
               "recover_seconds": log["seconds"], "total_seconds": time.perf_counter() - t0,
               "brdf_log_rmse_scale_invariant": brdf_error(found, truth),
               "mean_material_log_rmse_scale_invariant": brdf_error(shipped_model().mean_material(), truth),
-              "illumination_log_rmse_after_scale": float(np.sqrt(np.mean(r * r))),
-              "relit_log_rmse_after_scale": relit_err,
+              "illumination_log_rmse_after_scale": scale_invariant_log_error(sky_found, sky_truth, seen),
+              "relit_log_rmse_after_scale": scale_invariant_log_error(relit[1], relit[0], lit),
               "unseen_texels": log.get("unseen_texels"), "rounds": len(log["rounds"]),
               "final_neg_log_posterior": log["rounds"][-1]["neg_log_posterior"]}
     with open(os.path.join(out, "report.json"), "w") as f:

@@ -18,9 +18,10 @@ fit is left out of bases and priors) and scores it:
 * ``brdf_eq5``: Eq. 5 with the known light scale (point lights: the BRDF
   times recovered / true intensity);
 * ``direction_error_deg`` (point lights);
-* ``illumination_error``: relative RMSE of the seen texels after the best
-  scale (probes, :func:`illumination_error`);
-* ``relight_error``: scale-invariant log-RMSE (:func:`image_error`) of the
+* ``illumination_error``: the scale-invariant log-RMSE
+  (:func:`scale_invariant_log_error`) of the seen texels against the truth
+  map at the recovered resolution (probes);
+* ``relight``: the same measure (:func:`scale_invariant_log_error`) on the
   recovered material relit under two other probes against the measured
   material under them (paper Fig. 9); the images (truth, recovered at its
   best scale; in units of the truth's mean) are returned for the report;
@@ -127,22 +128,22 @@ def direction_error_deg(a, b) -> float:
     return math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
 
-def illumination_error(recovered, truth, seen) -> float:
-    """Relative RMSE ||s R - T|| / ||T|| over the ``seen`` texels (H, W) after the
-    best scale s (the map's scale trades off against the material's)."""
-    r = np.asarray(recovered, np.float64)[seen].reshape(-1)
-    t = np.asarray(truth, np.float64)[seen].reshape(-1)
-    s = float(r @ t / max(r @ r, 1e-300))
-    return float(np.linalg.norm(s * r - t) / max(np.linalg.norm(t), 1e-300))
-
-
-def image_error(image, truth, mask) -> float:
-    """Scale-invariant log-RMSE of two renders over ``mask`` (H, W): Eq. 20's
-    measure on pixels, log(1 + v / mean(truth)) after the best scale of ``image``."""
+def scale_invariant_log_error(values, truth, mask) -> float:
+    """Eq. 20's measure on images or illumination maps: the RMSE of
+    log(1 + s v / m) - log(1 + t / m) over ``mask`` (H, W), m the truth's mean
+    there, at the best scale s of ``values`` (light and material trade scale)."""
     from .metrics import log_rmse_scale_invariant
     t = np.asarray(truth, np.float64)[mask]
     ref = max(float(t.mean()), 1e-300)
-    return log_rmse_scale_invariant(np.asarray(image, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]))[0]
+    return log_rmse_scale_invariant(np.asarray(values, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]))[0]
+
+
+def _normalised_pair(truth, values, mask) -> np.ndarray:
+    """(2, H, W, 3) float16: truth and ``values`` at its best linear scale, in units of the truth's mean."""
+    t, v = np.asarray(truth, np.float64), np.asarray(values, np.float64)
+    ref = max(float(t[mask].mean()), 1e-300)
+    s = float((t[mask] * v[mask]).sum() / max((v[mask] ** 2).sum(), 1e-300))
+    return np.clip(np.stack([t, s * v]) / ref, 0, 6e4).astype(np.float16)
 
 
 def bsdf_values(bsdf, samples) -> np.ndarray:
@@ -247,17 +248,21 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             values = bsdf_values(material, samples) if method == "principled-adam" else \
                 material.eval(samples.theta_h, samples.theta_d)
             seen = np.ones((H, W), bool)
-        out["illumination_error"] = illumination_error(recovered_map, downsample(truth, H, W), seen)
+        small = downsample(truth, H, W)
+        out["illumination_error"] = scale_invariant_log_error(recovered_map, small, seen)
+        maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
     out["brdf_eq20"] = log_rmse_scale_invariant(values, samples.values, samples.cos_i)[0]
     out["trace"] = [float(r["neg_log_posterior"]) for r in rows]
     out["rounds"] = len(rows)
     out["relight"], images = _relight(case, material, merl, data)
+    if case["kind"] == "probe":
+        images.update(maps)
     out["finite"] = _finite(out)
     out["images"] = images
     return out
 
 
-def _relight(case, material, merl, data, res=48, map_hw=(16, 32)):
+def _relight(case, material, merl, data, res=48, map_hw=(32, 64)):
     """Relit image errors under two probes other than the case's, and the images
     (truth, recovered) for the report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
     probes = [p for p in RELIGHT_PROBES if p != case.get("probe")][:2]
@@ -269,9 +274,6 @@ def _relight(case, material, merl, data, res=48, map_hw=(16, 32)):
         L = downsample(read_probe(os.path.join(data, "envmaps", p)), *map_hw).reshape(-1, 3)
         a, b = render(truth_ts, L), render(ts, L)
         key = os.path.splitext(os.path.basename(p))[0]
-        errors[key] = image_error(b, a, truth_ts.mask)
-        # stored in units of the truth's mean, the recovered image at its best scale (float16 range)
-        ref = max(float(a[truth_ts.mask].mean()), 1e-300)
-        s = float((a * b).sum() / max((b * b).sum(), 1e-300))
-        images[key] = np.clip(np.stack([a, s * b]) / ref, 0, 6e4).astype(np.float16)
+        errors[key] = scale_invariant_log_error(b, a, truth_ts.mask)
+        images[key] = _normalised_pair(a, b, truth_ts.mask)
     return errors, images

@@ -31,11 +31,12 @@ def test_metrics_are_scale_invariant_and_detect_errors():
     rng = np.random.default_rng(0)
     t = rng.random((8, 16, 3)) + 0.1
     seen = np.ones((8, 16), bool)
-    assert ev.illumination_error(7.0 * t, t, seen) < 1e-12
-    assert ev.illumination_error(t + rng.random(t.shape), t, seen) > 0.1
-    mask = seen
-    assert ev.image_error(0.3 * t, t, mask) < 1e-6
-    assert ev.image_error(t ** 2, t, mask) > 0.05
+    assert ev.scale_invariant_log_error(7.0 * t, t, seen) < 1e-6
+    assert ev.scale_invariant_log_error(t + 3 * rng.random(t.shape), t, seen) > 0.1
+    assert ev.scale_invariant_log_error(t ** 3, t, seen) > 0.05
+    half = seen.copy()
+    half[:4] = False             # only the masked texels count
+    assert ev.scale_invariant_log_error(np.where(half[..., None], t, 1e3), t, half) < 1e-6
     assert abs(ev.direction_error_deg([1, 0, 0], [1, 1, 0]) - 45.0) < 1e-9
 
 
@@ -87,6 +88,8 @@ def test_runner_is_resumable_and_the_report_is_written(data, tmp_path):
     assert again["skipped"] == 3 and not again["done"]
     r = json.load(open(os.path.join(out, todo[2]["id"] + ".json")))
     assert r["finite"] and 0 <= r["illumination_error"] and r["rounds"] >= 2
+    with np.load(os.path.join(out, todo[2]["id"] + ".npz")) as f:
+        assert f["illumination"].shape == (2, 8, 16, 3) and f["pisa"].shape == (2, 48, 48, 3)
     docs = tmp_path / "docs"
     experiments_report.write_report(out, str(docs))
     md = (docs / "experiments.md").read_text()
