@@ -45,11 +45,23 @@ def _tonemap(img, ref):
     return np.clip(np.asarray(img, np.float64) / max(ref, 1e-12), 0, 1) ** (1 / 2.2)
 
 
+def _save(fig, fig_dir, name) -> None:
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    fig.savefig(os.path.join(fig_dir, name), dpi=110)
+    plt.close(fig)
+
+
+def _fmt(r, key, fmt) -> str:
+    """``fmt % r[key]``, or a dash for a measure this case does not have."""
+    return fmt % r[key] if key in r else "–"
+
+
 def write_report(results_dir, docs_dir) -> str:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    rs = [r for r in load(results_dir)]
+    rs = load(results_dir)
     fig_dir = os.path.join(docs_dir, "experiments")
     os.makedirs(fig_dir, exist_ok=True)
     by_id = {r["case"]["id"]: r for r in rs}
@@ -96,9 +108,7 @@ def write_report(results_dir, docs_dir) -> str:
             ax.set_xticklabels([_label(r) for r in sel], rotation=70, ha="right", fontsize=7)
             ax.set_ylabel("BRDF error, Eq. 20")
             ax.set_title("%s light, with priors (sorted)" % g)
-        fig.tight_layout()
-        fig.savefig(os.path.join(fig_dir, "fig5_sorted_error.png"), dpi=110)
-        plt.close(fig)
+        _save(fig, fig_dir, "fig5_sorted_error.png")
         md += ["## Error per case (Fig. 5)", "", "![sorted error](experiments/fig5_sorted_error.png)", ""]
 
     # --- Fig. 6: direction errors --------------------------------------------------------
@@ -109,9 +119,7 @@ def write_report(results_dir, docs_dir) -> str:
         ax.set_xlabel("light direction error (deg)")
         ax.set_ylabel("cases")
         ax.set_title("point light, %d cases (median %.2f°, max %.2f°)" % (len(d), np.median(d), np.max(d)))
-        fig.tight_layout()
-        fig.savefig(os.path.join(fig_dir, "fig6_direction_error.png"), dpi=110)
-        plt.close(fig)
+        _save(fig, fig_dir, "fig6_direction_error.png")
         md += ["## Light direction (Fig. 6)", "", "![direction error](experiments/fig6_direction_error.png)", ""]
 
     # --- Fig. 7: with vs without priors ---------------------------------------------------
@@ -131,9 +139,7 @@ def write_report(results_dir, docs_dir) -> str:
         ax.set_ylabel("Eq. 20 with priors")
         ax.set_title("below the line: the priors help")
         ax.legend()
-        fig.tight_layout()
-        fig.savefig(os.path.join(fig_dir, "fig7_priors.png"), dpi=110)
-        plt.close(fig)
+        _save(fig, fig_dir, "fig7_priors.png")
         wins = sum(a["brdf_eq20"] < b["brdf_eq20"] for a, b in pairs)
         md += ["## With and without priors (Fig. 7)", "",
                "The priors lower Eq. 20 in %d of %d paired cases." % (wins, len(pairs)), "",
@@ -154,9 +160,7 @@ def write_report(results_dir, docs_dir) -> str:
         ax.set_xscale("log")
         ax.set_xlabel("γ of the most specular lobe (θd = 0)")
         ax.set_ylabel("illumination error (log-RMSE, best scale)")
-        fig.tight_layout()
-        fig.savefig(os.path.join(fig_dir, "fig8_illumination_vs_specularity.png"), dpi=110)
-        plt.close(fig)
+        _save(fig, fig_dir, "fig8_illumination_vs_specularity.png")
         md += ["## Illumination against specularity (Fig. 8)", "",
                "![illumination error](experiments/fig8_illumination_vs_specularity.png)", ""]
 
@@ -179,9 +183,7 @@ def write_report(results_dir, docs_dir) -> str:
             for ax in row:
                 ax.set_xticks([])
                 ax.set_yticks([])
-        fig.tight_layout()
-        fig.savefig(os.path.join(fig_dir, "fig9_relighting.png"), dpi=110)
-        plt.close(fig)
+        _save(fig, fig_dir, "fig9_relighting.png")
         md += ["## Relighting (Fig. 9)", "",
                "Each recovered material under two probes it was not recovered under, beside the measured",
                "material (the recovered one at the best overall scale; in brackets its relit error).", "",
@@ -209,9 +211,7 @@ def write_report(results_dir, docs_dir) -> str:
             ax.set_xlabel("wall time (s), one core")
             ax.legend(fontsize=8)
         fig.suptitle("%s under %s" % (sel[0]["case"]["material"], os.path.basename(sel[0]["case"]["probe"])))
-        fig.tight_layout()
-        fig.savefig(os.path.join(fig_dir, "error_vs_time.png"), dpi=110)
-        plt.close(fig)
+        _save(fig, fig_dir, "error_vs_time.png")
         md += ["## Error against run time", "",
                "`dsbrdf`: this tool (deterministic texel-sum forward model, L-BFGS / Levenberg-Marquardt",
                "blocks, priors) at several budgets (map size, rounds, iterations per block).",
@@ -242,9 +242,7 @@ def write_report(results_dir, docs_dir) -> str:
         ax.set_xlabel("logged round (light search / starts, then rounds)")
         ax.set_ylabel("−log posterior / first value")
         ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(os.path.join(fig_dir, "stiff_traces.png"), dpi=110)
-        plt.close(fig)
+        _save(fig, fig_dir, "stiff_traces.png")
         md += ["## Stiff and extreme cases", "",
                "How each converges: logged rounds, the negative log posterior at the first and last",
                "of them, and whether every number of the result is finite.", "",
@@ -254,8 +252,7 @@ def write_report(results_dir, docs_dir) -> str:
             t = r["trace"]
             md.append("| %s | %d | %.4g → %.4g | %s | %.3f | %s | %s | %.0f |" % (
                 _label(r), r["rounds"], t[0], t[-1], "yes" if r["finite"] else "**no**", r["brdf_eq20"],
-                "%.2f°" % r["direction_error_deg"] if "direction_error_deg" in r else "–",
-                "%.3f" % r["illumination_error"] if "illumination_error" in r else "–", r["seconds"]))
+                _fmt(r, "direction_error_deg", "%.2f°"), _fmt(r, "illumination_error", "%.3f"), r["seconds"]))
         md += ["", "![traces](experiments/stiff_traces.png)", ""]
 
     # --- all cases --------------------------------------------------------------------------
@@ -263,9 +260,8 @@ def write_report(results_dir, docs_dir) -> str:
            "|---|---|---|---|---|---|---|"]
     for r in rs:
         md.append("| %s | %.3f | %s | %s | %s | %.3f | %.0f |" % (
-            r["case"]["id"], r["brdf_eq20"], "%.3f" % r["brdf_eq5"] if "brdf_eq5" in r else "–",
-            "%.2f°" % r["direction_error_deg"] if "direction_error_deg" in r else "–",
-            "%.3f" % r["illumination_error"] if "illumination_error" in r else "–",
+            r["case"]["id"], r["brdf_eq20"], _fmt(r, "brdf_eq5", "%.3f"), _fmt(r, "direction_error_deg", "%.2f°"),
+            _fmt(r, "illumination_error", "%.3f"),
             float(np.mean(list(r["relight"].values()))), r["seconds"]))
     path = os.path.join(docs_dir, "experiments.md")
     with open(path, "w") as f:

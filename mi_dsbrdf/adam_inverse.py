@@ -25,16 +25,12 @@ LR_BSDF, LR_MAP = 0.02, 0.05
 
 
 def _scene(bsdf, res, map_hw, shape, level):
-    import os
     import mitsuba as mi
-    from .scenes import SCENE_DIR, camera
-    obj = ({"type": "sphere"} if shape == "sphere" else
-           {"type": "ply", "filename": os.path.join(SCENE_DIR, "meshes", "torus.ply")})
-    obj["bsdf"] = bsdf
+    from .scenes import camera, shape_dict
     H, W = map_hw
     env = mi.Bitmap(np.full((H, W, 3), level, dtype=np.float32))
     return mi.load_dict({"type": "scene", "integrator": {"type": "prb", "max_depth": 2 if shape == "sphere" else 3},
-                         "sensor": camera(res), "object": obj, "emitter": {"type": "envmap", "bitmap": env}})
+                         "sensor": camera(res), "object": shape_dict(shape, bsdf), "emitter": {"type": "envmap", "bitmap": env}})
 
 
 def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100, shape="sphere", seed=0,

@@ -89,7 +89,7 @@ def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3
     from .illumination import write_exr
     from .evaluation import scale_invariant_log_error
     from .model_data import shipped_model
-    from .pipeline import prepare_out, recover_files
+    from .pipeline import prepare_out, read_image, recover_files
     from .render import save_preview
     from .scenes import camera
     prepare_out(out, force)
@@ -111,8 +111,7 @@ def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3
     truth = load_material(material)
     found = load_material(os.path.join(rec, "material.json"))
     sky_truth = latlong_of(sunsky(SUN), *map_size)
-    sky_found = mi.Bitmap(os.path.join(rec, "illumination.exr"))
-    sky_found = np.array(sky_found, dtype=np.float64)[..., :3]
+    sky_found = read_image(os.path.join(rec, "illumination.exr"))
     seen = sky_found.mean(axis=2) > 0
     relit = []
     for name in ("truth", "recovered"):

@@ -60,18 +60,12 @@ def downsample(env, height, width) -> np.ndarray:
 
 
 def texels(bsdf: dict, res: int, map_hw=(1, 1), shape="sphere"):
-    """A :class:`~mi_dsbrdf.forward.TexelSum` of ``shape`` (sphere, or the shipped
-    non-convex torus, then with shadow rays) carrying ``bsdf``, seen by the shipped camera."""
+    """A :class:`~mi_dsbrdf.forward.TexelSum` of ``shape`` (:func:`~mi_dsbrdf.scenes.shape_dict`;
+    anything but the sphere with shadow rays) carrying ``bsdf``, seen by the shipped camera."""
     import mitsuba as mi
     from .forward import TexelSum
-    from .scenes import SCENE_DIR, camera
-    if shape == "sphere":
-        obj = {"type": "sphere", "bsdf": bsdf}
-    elif shape == "torus":
-        obj = {"type": "ply", "filename": os.path.join(SCENE_DIR, "meshes", "torus.ply"), "bsdf": bsdf}
-    else:
-        raise ValueError("shape must be sphere or torus, got %r" % (shape,))
-    scene = mi.load_dict({"type": "scene", "sensor": camera(res), "object": obj})
+    from .scenes import camera, shape_dict
+    scene = mi.load_dict({"type": "scene", "sensor": camera(res), "object": shape_dict(shape, bsdf)})
     return TexelSum(scene, scene.shapes()[0], tuple(map_hw), visibility=shape != "sphere")
 
 
@@ -88,11 +82,6 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
     img = np.zeros((h * w, 3))
     img[ts.pixels] = ts.render(np.asarray(illumination).reshape(-1, 3))
     return img.reshape(h, w, 3)
-
-
-def read_probe(path) -> np.ndarray:
-    import mitsuba as mi
-    return np.array(mi.Bitmap(os.fspath(path)), dtype=np.float64)[..., :3]
 
 
 def loo_model(name, cache):
@@ -199,6 +188,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     from .fitting import samples_from_table
     from .measured import MeasuredBRDF
     from .metrics import log_rmse, log_rmse_scale_invariant
+    from .pipeline import read_image
     if threads:
         dr.set_thread_count(threads)
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
@@ -227,7 +217,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         out["intensity_ratio"] = result["intensity"] / POINT_INTENSITY
         out["brdf_eq5"] = log_rmse(values * out["intensity_ratio"], samples.values, samples.cos_i)
     else:
-        probe = read_probe(os.path.join(data, "envmaps", case["probe"]))
+        probe = read_image(os.path.join(data, "envmaps", case["probe"]))
         truth = downsample(probe, 2 * H, 2 * W)
         ts = texels(merl, res, (2 * H, 2 * W), shape=shape)
         img = render(ts, truth.reshape(-1, 3))
@@ -265,13 +255,14 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
 def _relight(case, material, merl, data, res=48, map_hw=(32, 64)):
     """Relit image errors under two probes other than the case's, and the images
     (truth, recovered) for the report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
+    from .pipeline import read_image
     probes = [p for p in RELIGHT_PROBES if p != case.get("probe")][:2]
     bsdf = dsbrdf_bsdf(material) if hasattr(material, "log_kappa") else material
     errors, images = {}, {}
     truth_ts = texels(merl, res, map_hw)
     ts = texels(bsdf, res, map_hw)
     for p in probes:
-        L = downsample(read_probe(os.path.join(data, "envmaps", p)), *map_hw).reshape(-1, 3)
+        L = downsample(read_image(os.path.join(data, "envmaps", p)), *map_hw).reshape(-1, 3)
         a, b = render(truth_ts, L), render(ts, L)
         key = os.path.splitext(os.path.basename(p))[0]
         errors[key] = scale_invariant_log_error(b, a, truth_ts.mask)

@@ -38,7 +38,6 @@ def render_to_files(scene_file, out_stem, spp=None, **params) -> dict:
 
 
 #: Shapes ``relight`` knows by name; anything else is a mesh file (.ply/.obj).
-RELIGHT_SHAPES = ("sphere", "torus")
 
 
 def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=64) -> dict:
@@ -48,7 +47,7 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
     import mitsuba as mi
     from .errors import MiDsbrdfError
     from .library import library_names
-    from .scenes import SCENE_DIR, camera
+    from .scenes import camera, shape_dict
     bsdf = {"type": "dsbrdf"}
     if os.path.exists(os.fspath(material_file)):
         bsdf["filename"] = os.path.abspath(os.fspath(material_file))
@@ -58,15 +57,7 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
         raise MiDsbrdfError("material %s is neither a file nor a library material" % material_file)
     if not os.path.exists(os.fspath(envmap_file)):
         raise MiDsbrdfError("envmap %s does not exist" % envmap_file)
-    if shape == "sphere":
-        obj = {"type": "sphere"}
-    elif shape == "torus":
-        obj = {"type": "ply", "filename": os.path.join(SCENE_DIR, "meshes", "torus.ply")}
-    elif os.path.exists(shape) and shape.lower().endswith((".ply", ".obj")):
-        obj = {"type": shape.lower().rsplit(".", 1)[1], "filename": os.path.abspath(shape)}
-    else:
-        raise MiDsbrdfError("shape %r: give %s or an existing .ply/.obj file" % (shape, " or ".join(RELIGHT_SHAPES)))
-    obj["bsdf"] = bsdf
+    obj = shape_dict(shape, bsdf)
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "path", "max_depth": 4},
         "sensor": camera(res, 32, box_filter=False),

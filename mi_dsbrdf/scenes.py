@@ -31,6 +31,26 @@ def camera(res: int, fov: float = 30.0, box_filter: bool = True) -> dict:
             "film": film}
 
 
+#: shapes known by name (besides a .ply/.obj mesh file)
+SHAPES = ("sphere", "torus")
+
+
+def shape_dict(shape: str, bsdf) -> dict:
+    """Mitsuba dict of ``shape`` (``sphere``, the shipped non-convex ``torus``, or a
+    .ply/.obj mesh file) carrying ``bsdf`` (a dict or a BSDF instance)."""
+    from .errors import MiDsbrdfError
+    if shape == "sphere":
+        obj = {"type": "sphere"}
+    elif shape == "torus":
+        obj = {"type": "ply", "filename": os.path.join(SCENE_DIR, "meshes", "torus.ply")}
+    elif os.path.exists(shape) and shape.lower().endswith((".ply", ".obj")):
+        obj = {"type": shape.lower().rsplit(".", 1)[1], "filename": os.path.abspath(shape)}
+    else:
+        raise MiDsbrdfError("shape %r: give %s or an existing .ply/.obj file" % (shape, " or ".join(SHAPES)))
+    obj["bsdf"] = bsdf
+    return obj
+
+
 def sphere_scene(bsdf: dict, res: int = 24, fov: float = 30.0):
     """A unit sphere with ``bsdf`` seen by :func:`camera`, no light: a small scene
     for the texel-sum forward model (:mod:`mi_dsbrdf.forward`), which brings its own."""
