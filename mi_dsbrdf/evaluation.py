@@ -4,7 +4,8 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
 
     {"id": "point-chrome-60-priors", "kind": "point" | "probe", "material": MERL name,
      "angle": degrees from the viewer (point), "probe": "probulator/grace.hdr" (probe),
-     "priors": bool, "shape": "sphere" | "torus", "res": pixels, "map": [H, W],
+     "priors": bool, "weights": {"w_entropy": ..., ...} (optional Config prior
+     weights, with priors), "shape": "sphere" | "torus", "res": pixels, "map": [H, W],
      "rounds": int, "iters": int, "method": "dsbrdf" | "dsbrdf-adam" | "principled-adam",
      "spp": samples per pixel (Adam methods)}
 
@@ -199,7 +200,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     merl = {"type": "merl", "nbrdf": nbrdf, "material": name}
     shape = case.get("shape", "sphere")
     method = case.get("method", "dsbrdf")
-    weights = {} if case.get("priors", True) else NO_PRIORS
+    weights = case.get("weights", {}) if case.get("priors", True) else NO_PRIORS
     cfg = inference.Config(map_size=(H, W), max_rounds=case.get("rounds", 3), block_iters=case.get("iters", 15),
                            **weights)
     out = {"case": case, "specularity": specularity(name)}

@@ -47,6 +47,11 @@ CURVE_MARGIN = 1.0
 CURVE_PENALTY = 100.0
 #: largest change of the light's log scale in one Levenberg-Marquardt step
 MAX_SCALE_STEP = 5.0
+#: observed pixels at which the prior weights of :class:`Config` apply as given (a
+#: 64-pixel sphere covers 3000, the renders they were tuned on): the likelihood sums over pixels,
+#: so the weights are scaled by (observed pixels / PRIOR_PIXELS) to keep the balance
+#: of likelihood and priors the same at any image resolution
+PRIOR_PIXELS = 3000
 
 
 @dataclasses.dataclass
@@ -60,6 +65,8 @@ class Config:
     illumination_iters: int = 60
     #: Laplacian scale b of Eq. 19 in log units: the expected |log error| of a pixel
     likelihood_scale: float = 0.05
+    #: prior weights (lambda of Eq. 18) at PRIOR_PIXELS observed pixels, chosen on
+    #: held-out materials and probe by ``benchmarks/tune_priors.py``
     w_gmm: float = 1.0
     w_hue: float = 1.0
     w_entropy: float = 1.0
@@ -116,8 +123,11 @@ class Posterior:
         self.curve_range = (ctrl.min(axis=0).reshape(-1) - CURVE_MARGIN, ctrl.max(axis=0).reshape(-1) + CURVE_MARGIN)
         c0 = model.basis.control_values(np.zeros(k)).reshape(-1)      # control values are linear in psi
         self.curve_map = (c0, np.stack([model.basis.control_values(e).reshape(-1) - c0 for e in np.eye(k)], axis=1))
-        self.entropy = EntropyPrior(config.w_entropy)
-        self.gradient = GradientPrior(config.w_gradient)
+        # prior weights scaled to the number of observed pixels (see PRIOR_PIXELS)
+        n = keep.sum() / PRIOR_PIXELS
+        self.w = {t: n * getattr(config, "w_" + t) for t in ("gmm", "hue", "entropy", "gradient")}
+        self.entropy = EntropyPrior(self.w["entropy"])
+        self.gradient = GradientPrior(self.w["gradient"])
         self._dr = dr
 
     def aim(self, theta, phi):
@@ -143,9 +153,9 @@ class Posterior:
         (Eq. 6), hue (Eq. 12) and, given a map, entropy (Eq. 13-15) and gradient (Eq. 16)."""
         terms = {"curve_penalty": self.curve_penalty(psi)[0]}
         if self.model.gmm is not None:
-            terms["gmm"] = self.cfg.w_gmm * self.model.gmm.nll(psi)
+            terms["gmm"] = self.w["gmm"] * self.model.gmm.nll(psi)
         if self.model.hue_prior is not None:
-            terms["hue"] = self.cfg.w_hue * self.model.hue_prior.nll(softmax_chroma(logits))
+            terms["hue"] = self.w["hue"] * self.model.hue_prior.nll(softmax_chroma(logits))
         if log_map is not None:
             terms["entropy"] = self.entropy(log_map, bins)[0]
             terms["gradient"] = self.gradient(log_map)[0]
@@ -372,13 +382,13 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
             gm = post.model.gmm
             lc, _ = gm._component_logs(psi[None])
             prec = gm._prec[int(np.argmax(lc[0]))]
-            H[:k, :k] += post.cfg.w_gmm * prec
-            g[:k] += post.cfg.w_gmm * gm.grad(psi)
+            H[:k, :k] += post.w["gmm"] * prec
+            g[:k] += post.w["gmm"] * gm.grad(psi)
         _, g_curve, h_curve = post.curve_penalty(psi)
         H[:k, :k] += h_curve
         g[:k] += g_curve
         if post.model.hue_prior is not None:
-            gh = post.cfg.w_hue * post.model.hue_prior.grad(c)
+            gh = post.w["hue"] * post.model.hue_prior.grad(c)
             g[k:k + 2 * R] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
         improved = False
         for _ in range(10):

@@ -97,3 +97,27 @@ def test_runner_is_resumable_and_the_report_is_written(data, tmp_path):
     assert "gold-metallic-paint" in md and "fig7_priors.png" in md
     for name in ("fig5_sorted_error.png", "fig6_direction_error.png", "fig7_priors.png", "fig9_relighting.png"):
         assert (docs / "experiments" / name).stat().st_size > 1000
+
+
+def test_prior_tuning_keeps_test_materials_out_and_picks_the_lowest_geometric_mean(tmp_path):
+    import tune_priors
+    cases = tune_priors.tuning_cases()
+    assert not {c["material"] for c in cases} & set(tune_priors.QUICK_MATERIALS)
+    assert len({c["id"] for c in cases}) == len(cases)
+    with pytest.raises(AssertionError):
+        tune_priors.tuning_cases(materials=["pvc"])
+    # fabricated results: setting A has the lower median, B the lower geometric mean
+    eq20 = {"none": [0.5, 0.5, 0.5], "A": [0.1, 0.2, 0.9], "B": [0.05, 0.25, 0.3]}
+    for c in cases:
+        weights = c.get("weights")
+        key = "none" if not c["priors"] else {(1, 1): "A", (30, 300): "B"}.get(
+            (weights["w_entropy"], weights["w_gmm"]))
+        if key is None or c["material"] not in tune_priors.VALIDATION_MATERIALS[:3]:
+            continue
+        i = tune_priors.VALIDATION_MATERIALS.index(c["material"])
+        with open(tmp_path / (c["id"] + ".json"), "w") as f:
+            json.dump({"case": c, "brdf_eq20": eq20[key][i]}, f)
+    r = tune_priors.summarise(str(tmp_path))
+    assert r["median_eq20"]["illumination=1 reflectance=1"] < r["median_eq20"]["illumination=30 reflectance=300"]
+    assert r["best"] == "illumination=30 reflectance=300"
+    assert r["geometric_mean_eq20"]["none"] == pytest.approx(0.5)

@@ -107,3 +107,32 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences():
         e[idx] = 1e-4
         fd = (post.illumination_terms(x + e, T, seen, bins)[0] - post.illumination_terms(x - e, T, seen, bins)[0]) / 2e-4
         np.testing.assert_allclose(g[idx], fd, rtol=2e-3, atol=1e-3)
+
+
+def test_prior_weights_follow_the_observed_pixel_count():
+    """The likelihood sums over pixels, so the priors are weighted by observed pixels /
+    PRIOR_PIXELS: half the pixels masked out halves every prior term, and the Config
+    weights apply as given at PRIOR_PIXELS."""
+    from mi_dsbrdf import inference, model_data
+    from mi_dsbrdf.forward import TexelSum
+    from mi_dsbrdf.scenes import sphere_scene
+    s = sphere_scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, 12)
+    ts = TexelSum(s, s.shapes()[0], (4, 8))
+    observed = np.ones((12, 12, 3))
+    model = model_data.shipped_model()
+    cfg = inference.Config(map_size=(4, 8), w_gmm=2.0, w_entropy=3.0)
+    half = ts.mask.copy()
+    half[:6] = False
+    full_post = inference.Posterior(ts, observed, ts.mask, model, cfg)
+    half_post = inference.Posterior(ts, observed, half, model, cfg)
+    n_full, n_half = int(ts.mask.sum()), int(half.sum())
+    assert 0 < n_half < n_full
+    assert full_post.w["gmm"] == pytest.approx(2.0 * n_full / inference.PRIOR_PIXELS)
+    assert full_post.w["entropy"] == pytest.approx(3.0 * n_full / inference.PRIOR_PIXELS)
+    psi = np.linspace(-1, 1, model.basis.n_bases)
+    logits = np.zeros((model.basis.n_lobes, 2))
+    x = np.random.default_rng(0).normal(0, 1, (4, 8, 3))
+    a = full_post.prior_terms(psi, logits, x, full_post.entropy.bins_for(x))
+    b = half_post.prior_terms(psi, logits, x, half_post.entropy.bins_for(x))
+    for term in ("gmm", "hue", "entropy", "gradient"):
+        assert b[term] == pytest.approx(a[term] * n_half / n_full, rel=1e-9)
