@@ -6,8 +6,8 @@ priors hardly move the estimate. This sweep runs probe cases (synthetic MERL
 renders, leave-one-out models, as in ``benchmarks/experiments.py``) on
 *validation* materials under a *validation* probe, disjoint from the
 experiments' quick subset (its materials and its probe ``grace``), for a grid
-of two weights: ``illumination`` (entropy and gradient priors, Eq. 13-16) and
-``reflectance`` (GMM and hue priors, Eq. 6, 12), plus the no-prior baseline.
+of weights: ``illumination`` (entropy and gradient priors, Eq. 13-16), ``gmm``
+(Eq. 6) and ``hue`` (Eq. 12), plus the no-prior baseline.
 It prints each setting's geometric mean and median of Eq. 20 and writes the
 table and the best setting (lowest geometric mean: the errors of a fabric and an
 acrylic differ a hundredfold, and the median of four is the mean of the middle
@@ -36,8 +36,9 @@ RESULT = os.path.join(ROOT, "benchmarks", "results", "prior_weights.json")
 #: one of each kind of the test materials (acrylic, metallic paint, fabric, plastic), none of them
 VALIDATION_MATERIALS = ["violet-acrylic", "silver-metallic-paint", "blue-fabric", "yellow-plastic"]
 VALIDATION_PROBE = "probulator/wells.hdr"
-#: (illumination, reflectance) weights
-GRID = [(1, 1), (30, 1), (300, 1), (3000, 1), (1, 300), (300, 300), (30, 300), (3000, 300)]
+#: (illumination, gmm, hue) weights
+GRID = [(1, 1, 1), (30, 1, 1), (300, 1, 1), (3000, 1, 1), (1, 300, 300), (300, 300, 300), (30, 300, 300),
+        (3000, 300, 300), (30, 300, 1), (1, 300, 1)]
 
 
 def tuning_cases(materials=VALIDATION_MATERIALS, grid=GRID) -> list:
@@ -46,10 +47,10 @@ def tuning_cases(materials=VALIDATION_MATERIALS, grid=GRID) -> list:
     for m in materials:
         base = _case("tune", "probe", m, False, probe=VALIDATION_PROBE)
         out.append(base)
-        for wi, wr in grid:
+        for wi, wg, wh in grid:
             c = _case("tune", "probe", m, True, probe=VALIDATION_PROBE,
-                      weights=dict(w_entropy=wi, w_gradient=wi, w_gmm=wr, w_hue=wr))
-            c["id"] = c["id"].replace("-priors", "-illum%g-refl%g" % (wi, wr))
+                      weights=dict(w_entropy=wi, w_gradient=wi, w_gmm=wg, w_hue=wh))
+            c["id"] = c["id"].replace("-priors", "-illum%g-gmm%g-hue%g" % (wi, wg, wh))
             out.append(c)
     return out
 
@@ -57,21 +58,24 @@ def tuning_cases(materials=VALIDATION_MATERIALS, grid=GRID) -> list:
 def summarise(out=OUT) -> dict:
     """{setting: {material: Eq. 20}} from the finished cases, each complete setting's
     geometric mean and median, and the setting with the lowest geometric mean."""
-    table = {}
+    table, weights = {}, {}
     for f in sorted(glob.glob(os.path.join(out, "*.json"))):
         with open(f) as fh:
             r = json.load(fh)
         c = r["case"]
         w = c.get("weights")
-        key = "none" if not c["priors"] else "illumination=%g reflectance=%g" % (w["w_entropy"], w["w_gmm"])
+        key = "none" if not c["priors"] else "illumination=%g gmm=%g hue=%g" % (
+            w["w_entropy"], w["w_gmm"], w["w_hue"])
         table.setdefault(key, {})[c["material"]] = r["brdf_eq20"]
+        weights[key] = w
     n = max(len(v) for v in table.values())
     full = {k: np.array(list(v.values())) for k, v in table.items() if len(v) == n}
     gmean = {k: float(np.exp(np.log(v).mean())) for k, v in full.items()}
     best = min((k for k in gmean if k != "none"), key=gmean.get)
     return {"command": "python benchmarks/tune_priors.py", "materials": VALIDATION_MATERIALS,
             "probe": VALIDATION_PROBE, "eq20": table, "geometric_mean_eq20": gmean,
-            "median_eq20": {k: float(np.median(v)) for k, v in full.items()}, "best": best}
+            "median_eq20": {k: float(np.median(v)) for k, v in full.items()}, "best": best,
+            "best_weights": weights[best]}
 
 
 def main(argv=None):

@@ -66,8 +66,11 @@ class Config:
     #: Laplacian scale b of Eq. 19 in log units: the expected |log error| of a pixel
     likelihood_scale: float = 0.05
     #: prior weights (lambda of Eq. 18) at PRIOR_PIXELS observed pixels, chosen on
-    #: held-out materials and probe by ``benchmarks/tune_priors.py``
-    w_gmm: float = 1.0
+    #: held-out materials and a held-out probe by ``benchmarks/tune_priors.py``
+    #: (``benchmarks/results/prior_weights.json``): the GMM prior strong (it resolves
+    #: the split of gloss between material and light), the others at 1 (a strong hue
+    #: prior traps the chromaticity from its random start)
+    w_gmm: float = 300.0
     w_hue: float = 1.0
     w_entropy: float = 1.0
     w_gradient: float = 1.0

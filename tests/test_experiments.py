@@ -110,14 +110,26 @@ def test_prior_tuning_keeps_test_materials_out_and_picks_the_lowest_geometric_me
     eq20 = {"none": [0.5, 0.5, 0.5], "A": [0.1, 0.2, 0.9], "B": [0.05, 0.25, 0.3]}
     for c in cases:
         weights = c.get("weights")
-        key = "none" if not c["priors"] else {(1, 1): "A", (30, 300): "B"}.get(
-            (weights["w_entropy"], weights["w_gmm"]))
+        key = "none" if not c["priors"] else {(1, 1, 1): "A", (30, 300, 300): "B"}.get(
+            (weights["w_entropy"], weights["w_gmm"], weights["w_hue"]))
         if key is None or c["material"] not in tune_priors.VALIDATION_MATERIALS[:3]:
             continue
         i = tune_priors.VALIDATION_MATERIALS.index(c["material"])
         with open(tmp_path / (c["id"] + ".json"), "w") as f:
             json.dump({"case": c, "brdf_eq20": eq20[key][i]}, f)
     r = tune_priors.summarise(str(tmp_path))
-    assert r["median_eq20"]["illumination=1 reflectance=1"] < r["median_eq20"]["illumination=30 reflectance=300"]
-    assert r["best"] == "illumination=30 reflectance=300"
+    assert r["median_eq20"]["illumination=1 gmm=1 hue=1"] < r["median_eq20"]["illumination=30 gmm=300 hue=300"]
+    assert r["best"] == "illumination=30 gmm=300 hue=300"
+    assert r["best_weights"] == dict(w_entropy=30, w_gradient=30, w_gmm=300, w_hue=300)
     assert r["geometric_mean_eq20"]["none"] == pytest.approx(0.5)
+
+
+def test_config_defaults_are_the_tuned_prior_weights():
+    """inference.Config's prior weights are the ones the committed sweep chose."""
+    from mi_dsbrdf import inference
+    import tune_priors
+    with open(tune_priors.RESULT) as f:
+        tuned = json.load(f)
+    cfg = inference.Config()
+    assert {k: getattr(cfg, k) for k in tuned["best_weights"]} == tuned["best_weights"]
+    assert tuned["geometric_mean_eq20"][tuned["best"]] < tuned["geometric_mean_eq20"]["none"]
