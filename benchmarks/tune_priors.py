@@ -15,7 +15,7 @@ two, which hardly moves) to ``benchmarks/results/prior_weights.json``;
 ``Config``'s defaults are set from it by hand and the experiments rerun on the
 test materials.
 
-    .venv/bin/python benchmarks/tune_priors.py            # ~35 min on 2 workers
+    .venv/bin/python benchmarks/tune_priors.py            # 44 cases, ~1 h on 2 workers
 """
 from __future__ import annotations
 
