@@ -145,6 +145,26 @@ def run_cases(todo, client, out, data=DATA, cache=CACHE, threads=1, log=print) -
     return summary
 
 
+def run_on_cluster(todo, out, data=DATA, workers=2, scheduler=None, cache=CACHE) -> dict:
+    """:func:`run_cases` on the Dask scheduler at ``scheduler``, or on a LocalCluster
+    of ``workers`` single-threaded processes; prints and returns the summary."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")       # workers inherit it: one thread per case
+    from dask.distributed import Client, LocalCluster
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        client = Client(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                     dashboard_address=None))
+    try:
+        t0 = time.perf_counter()
+        s = run_cases(todo, client, out, data, cache)
+        print("%d done, %d skipped, %d failed in %.0f s" % (len(s["done"]), s["skipped"], len(s["failed"]),
+                                                             time.perf_counter() - t0))
+    finally:
+        client.close()
+    return s
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--full", action="store_true", help="every MERL material, angle and probe")
@@ -158,20 +178,7 @@ def main(argv=None):
     if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
         sys.exit("the experiments need the MERL fits under %s (see ../shared/data/README.md)" % args.data)
     todo = [c for c in cases(args.full, args.materials) if not args.groups or c["group"] in args.groups]
-    os.environ.setdefault("OMP_NUM_THREADS", "1")       # workers inherit it: one thread per case
-    from dask.distributed import Client, LocalCluster
-    if args.scheduler:
-        client = Client(args.scheduler)
-    else:
-        client = Client(LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                                     dashboard_address=None))
-    try:
-        t0 = time.perf_counter()
-        s = run_cases(todo, client, args.out, args.data)
-        print("%d done, %d skipped, %d failed in %.0f s" % (len(s["done"]), s["skipped"], len(s["failed"]),
-                                                             time.perf_counter() - t0))
-    finally:
-        client.close()
+    s = run_on_cluster(todo, args.out, args.data, args.workers, args.scheduler)
     sys.exit(1 if s["failed"] else 0)
 
 

@@ -20,16 +20,15 @@ test materials.
 from __future__ import annotations
 
 import argparse
-import glob
 import json
 import os
 import sys
-import time
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from experiments import CACHE, DATA, QUICK_MATERIALS, ROOT, _case, run_cases  # noqa: E402
+from experiments import DATA, QUICK_MATERIALS, ROOT, _case, run_on_cluster  # noqa: E402
+from experiments_report import load  # noqa: E402
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "tune_priors")
 RESULT = os.path.join(ROOT, "benchmarks", "results", "prior_weights.json")
@@ -59,9 +58,7 @@ def summarise(out=OUT) -> dict:
     """{setting: {material: Eq. 20}} from the finished cases, each complete setting's
     geometric mean and median, and the setting with the lowest geometric mean."""
     table, weights = {}, {}
-    for f in sorted(glob.glob(os.path.join(out, "*.json"))):
-        with open(f) as fh:
-            r = json.load(fh)
+    for r in load(out):
         c = r["case"]
         w = c.get("weights")
         key = "none" if not c["priors"] else "illumination=%g gmm=%g hue=%g" % (
@@ -83,17 +80,7 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    from dask.distributed import Client, LocalCluster
-    client = Client(LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                                 dashboard_address=None))
-    try:
-        t0 = time.perf_counter()
-        s = run_cases(tuning_cases(), client, OUT, args.data, CACHE)
-        print("%d done, %d skipped, %d failed in %.0f s" % (len(s["done"]), s["skipped"], len(s["failed"]),
-                                                             time.perf_counter() - t0))
-    finally:
-        client.close()
+    s = run_on_cluster(tuning_cases(), OUT, args.data, args.workers)
     result = summarise()
     for k, v in sorted(result["geometric_mean_eq20"].items(), key=lambda kv: kv[1]):
         print("%-38s Eq. 20 geometric mean %.3f median %.3f   %s" % (

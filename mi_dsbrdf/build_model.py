@@ -177,8 +177,7 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
         a = load_model(fits_from).arrays
         if "fit_controls" not in a:
             raise ModelError("%s holds no full fits to reuse" % fits_from)
-        fits = {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
-                "error": a["fit_error"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
+        fits = stored_fits(a)
     else:
         fits = fit_all(source, workers=workers, progress=progress)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress)
@@ -193,10 +192,19 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     return arrays
 
 
+def stored_fits(arrays) -> dict:
+    """The full fits a model file keeps (``fit_*`` arrays), in the form
+    :func:`fit_all` returns and :func:`build_from_fits` takes."""
+    a = arrays
+    return {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
+            "error": a["fit_error"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
+
+
 def save_model(path, arrays) -> None:
-    """Write a model file atomically (a temporary file renamed into place)."""
+    """Write a model file atomically (a temporary file of this process renamed
+    into place: parallel workers may write the same model)."""
     path = os.fspath(path)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    tmp = path + ".tmp.npz"
+    tmp = "%s.%d.tmp.npz" % (path, os.getpid())
     np.savez_compressed(tmp, **arrays)
     os.replace(tmp, path)

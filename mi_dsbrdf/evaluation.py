@@ -89,16 +89,11 @@ def loo_model(name, cache):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
     library from the other 99 fits; cached as ``cache/loo-<name>.npz``)."""
     from . import model_data
-    from .build_model import build_from_fits, save_model
+    from .build_model import build_from_fits, save_model, stored_fits
     path = os.path.join(cache, "loo-%s.npz" % name)
     if not os.path.exists(path):
-        a = model_data.shipped_model().arrays
-        fits = {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
-                "error": a["fit_error"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
-        os.makedirs(cache, exist_ok=True)
-        tmp = "%s.%d.npz" % (path[:-4], os.getpid())
-        save_model(tmp, build_from_fits(fits, exclude=[name], refit=False, progress=False))
-        os.replace(tmp, path)            # atomic: parallel workers may build the same model
+        fits = stored_fits(model_data.shipped_model().arrays)
+        save_model(path, build_from_fits(fits, exclude=[name], refit=False, progress=False))    # atomic
     return model_data.load_model(path)
 
 

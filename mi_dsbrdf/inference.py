@@ -276,10 +276,10 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
             # the full posterior at the new point; its T serves the next illumination block
             post.set_reflectance(state.psi, state.logits)
             T = texels.transport()
-            value, _, lik = post.illumination_terms(state.log_map, T, seen, bins)
-            total = value + post.reflectance_prior(state.psi, state.logits)
-            rows.append({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik,
-                         **post.prior_terms(state.psi, state.logits, state.log_map, bins),
+            lik = post.illumination_terms(state.log_map, T, seen, bins)[2]
+            terms = post.prior_terms(state.psi, state.logits, state.log_map, bins)
+            total = lik + sum(terms.values())
+            rows.append({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik, **terms,
                          "seconds": time.perf_counter() - t0, "unseen_texels": int((~seen).sum())})
             if progress:
                 progress(rows[-1])

@@ -37,9 +37,6 @@ def render_to_files(scene_file, out_stem, spp=None, **params) -> dict:
     return {"exr": out_stem + ".exr", "png": out_stem + ".png", "seconds": seconds}
 
 
-#: Shapes ``relight`` knows by name; anything else is a mesh file (.ply/.obj).
-
-
 def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=64) -> dict:
     """Render a recovered (or library) material on ``shape`` under a lat-long
     ``envmap_file`` with Mitsuba's path tracer; writes ``out_file`` (EXR) and a
