@@ -16,7 +16,8 @@ Resumable: each case writes ``<out>/<id>.json`` (and ``<id>.npz``, its relit
 images) when it finishes, and a rerun skips the cases whose file exists.
 Parallel on Dask: a LocalCluster of ``--workers`` single-threaded processes by
 default, or ``--scheduler tcp://host:8786`` for a cluster (its workers need
-this package installed and ``--data`` at the same path).
+this package installed, ``--data`` at the same path and one thread each,
+``dask worker --nthreads 1``: Dr.Jit in several threads of one process crashed).
 
     .venv/bin/python benchmarks/experiments.py              # quick subset (< 30 min here)
     .venv/bin/python benchmarks/experiments.py --full

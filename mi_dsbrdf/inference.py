@@ -193,13 +193,19 @@ class Posterior:
         return lik + self.reflectance_prior(psi, logits), lik
 
     # --- illumination ------------------------------------------------------------
-    def illumination_terms(self, log_map, T, seen, bins):
-        """(value, d/d log_map) of likelihood + entropy + gradient priors at fixed reflectance."""
+    def map_likelihood(self, log_map, T, seen, grad=True):
+        """(value, d/d log_map or None) of the likelihood (Eq. 19) of the map at fixed reflectance."""
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
         image = apply_transport(T, L)
         lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
                                           self.offset, self.scale)
-        g = transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * L
+        if not grad:
+            return lik, None
+        return lik, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * L
+
+    def illumination_terms(self, log_map, T, seen, bins):
+        """(value, d/d log_map, likelihood) of likelihood + entropy + gradient priors at fixed reflectance."""
+        lik, g = self.map_likelihood(log_map, T, seen)
         e, ge = self.entropy(log_map, bins)
         s, gs = self.gradient(log_map)
         return lik + e + s, g + ge + gs, lik
@@ -276,7 +282,7 @@ def recover(texels: TexelSum, observed, mask, model, config=Config(), colour=Tru
             # the full posterior at the new point; its T serves the next illumination block
             post.set_reflectance(state.psi, state.logits)
             T = texels.transport()
-            lik = post.illumination_terms(state.log_map, T, seen, bins)[2]
+            lik = post.map_likelihood(state.log_map, T, seen, grad=False)[0]
             terms = post.prior_terms(state.psi, state.logits, state.log_map, bins)
             total = lik + sum(terms.values())
             rows.append({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik, **terms,
