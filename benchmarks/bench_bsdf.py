@@ -18,7 +18,7 @@ import numpy as np
 import mi_dsbrdf  # noqa: F401
 import drjit as dr
 import mitsuba as mi
-from mi_dsbrdf.scenes import scene_path
+from mi_dsbrdf.app.scenes import scene_path
 
 BSDFS = {
     "dsbrdf": {"type": "dsbrdf", "lobes": 2, "kappa_0": "0.5", "gamma_0": "1",

@@ -1,7 +1,7 @@
 """The experiments of paper §6 on synthetic MERL renders, run in parallel on Dask.
 
 Groups of cases (:func:`cases`; each case is run and scored by
-:func:`mi_dsbrdf.evaluation.run_case`, always with a leave-one-out model):
+:func:`mi_dsbrdf.evaluation.experiment.run_case`, always with a leave-one-out model):
 
 * point: MERL materials x a point light at 30/60/90 deg from the viewer
   (``--full``: 0, 30, 60, 90, 120 and every material), with and without priors (§6.1);
@@ -61,7 +61,7 @@ def _case(group, kind, material, priors=True, **kw) -> dict:
 
 def cases(full=False, materials=None) -> list:
     """The case list: the quick subset, or with ``full`` every MERL material, angle and probe."""
-    from mi_dsbrdf.measured import nbrdf_names
+    from mi_dsbrdf.brdf.measured import nbrdf_names
     mats = materials or (nbrdf_names(os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")) if full
                          else QUICK_MATERIALS)
     angles = [0, 30, 60, 90, 120] if full else [30, 60, 90]
@@ -122,7 +122,7 @@ def save_result(result: dict, out: str) -> str:
 def run_cases(todo, client, out, data=DATA, cache=CACHE, threads=1, log=print) -> dict:
     """Run the cases not yet in ``out`` on a Dask ``client``; returns {"done", "skipped", "failed"}."""
     from dask.distributed import as_completed
-    from mi_dsbrdf.evaluation import run_case
+    from mi_dsbrdf.evaluation.experiment import run_case
     pending = [c for c in todo if not os.path.exists(os.path.join(out, c["id"] + ".json"))]
     pending.sort(key=_expected_seconds, reverse=True)
     summary = {"done": [], "skipped": len(todo) - len(pending), "failed": {}}

@@ -19,9 +19,10 @@ import time
 import numpy as np
 
 import mi_dsbrdf  # noqa: F401
-from mi_dsbrdf import inference, model_data
-from mi_dsbrdf.evaluation import POINT_DISTANCE, direction_error_deg, light_at, render, texels
-from mi_dsbrdf.illumination import procedural_sky
+from mi_dsbrdf.inference import envmap as inference
+from mi_dsbrdf.model import model_file as model_data
+from mi_dsbrdf.evaluation.experiment import POINT_DISTANCE, direction_error_deg, light_at, render, texels
+from mi_dsbrdf.inference.latlong import procedural_sky
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MATERIAL = {"type": "dsbrdf", "material": "gold-metallic-paint"}

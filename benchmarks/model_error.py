@@ -41,12 +41,14 @@ MODELS = [("lambert_ct1", "Lambert + 1 CT lobe", 10), ("lambert_ct3", "Lambert +
 
 def score(job):
     source, model_file, name = job
-    from mi_dsbrdf import baselines, build_model, fitting
-    from mi_dsbrdf.dsbrdf import Material
-    from mi_dsbrdf.fpca import fpca, l2_inner
-    from mi_dsbrdf.measured import MeasuredBRDF, grid_angles
-    from mi_dsbrdf.metrics import log_rmse
-    from mi_dsbrdf.model_data import load_model
+    from mi_dsbrdf.model import baselines
+    from mi_dsbrdf.model import build as build_model
+    from mi_dsbrdf.model import fitting
+    from mi_dsbrdf.brdf.dsbrdf import Material
+    from mi_dsbrdf.model.fpca import fpca, l2_inner
+    from mi_dsbrdf.brdf.measured import MeasuredBRDF, grid_angles
+    from mi_dsbrdf.evaluation.metrics import log_rmse
+    from mi_dsbrdf.model.model_file import load_model
     t0 = time.perf_counter()
     a = load_model(model_file).arrays
     names = [str(n) for n in a["fit_names"]]
@@ -102,7 +104,7 @@ def main():
         write_report(d["materials"], sorted(d["materials"]), d["medians"])
         return
     from tqdm import tqdm
-    from mi_dsbrdf.model_data import load_model
+    from mi_dsbrdf.model.model_file import load_model
     names = [str(n) for n in load_model(args.model).arrays["fit_names"]]
     if args.only:
         names = args.only

@@ -1,6 +1,6 @@
 """Choose the prior weights (lambda of Eq. 18) on held-out materials and a held-out probe.
 
-The weights of :class:`mi_dsbrdf.inference.Config` balance the priors against
+The weights of :class:`mi_dsbrdf.inference.envmap.Config` balance the priors against
 the likelihood (Eq. 19), which sums over thousands of pixels: at weight 1 the
 priors hardly move the estimate. This sweep runs probe cases (synthetic MERL
 renders, leave-one-out models, as in ``benchmarks/experiments.py``) on

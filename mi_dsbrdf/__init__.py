@@ -6,7 +6,7 @@ Importing the package
   3. registers the ``dsbrdf`` and ``merl`` BSDF plugins for the active variant,
      and again whenever ``mi.set_variant`` switches variant.
 """
-from .backend import select_libllvm as _select_libllvm
+from mi_dsbrdf.backend import select_libllvm as _select_libllvm
 
 _select_libllvm()
 
@@ -16,10 +16,10 @@ _backend.ensure_variant()
 _backend.register_plugins()
 _backend.install_variant_callback()
 
-from .dsbrdf import Material  # noqa: E402
-from .errors import (BackendError, MaterialError, MeasuredFileError, MiDsbrdfError,  # noqa: E402
+from mi_dsbrdf.brdf.dsbrdf import Material  # noqa: E402
+from mi_dsbrdf.errors import (BackendError, MaterialError, MeasuredFileError, MiDsbrdfError,  # noqa: E402
                      ModelError, VariantError)
-from .library import load_material  # noqa: E402
+from mi_dsbrdf.model.library import load_material  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["Material", "load_material", "BackendError", "MaterialError", "MeasuredFileError",

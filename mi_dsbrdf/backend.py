@@ -14,7 +14,7 @@ import os
 import re
 import sys
 
-from .errors import BackendError, VariantError
+from mi_dsbrdf.errors import BackendError, VariantError
 
 MIN_LLVM = 16
 DEFAULT_VARIANT = "llvm_ad_rgb"
@@ -99,7 +99,7 @@ def register_plugins(*_args) -> None:
     import mitsuba as mi
     if mi.variant() is None:
         return
-    from .plugins import bsdf_classes
+    from mi_dsbrdf.plugins import bsdf_classes
     for name, cls in bsdf_classes(mi.variant()).items():
         mi.register_bsdf(name, _factory(name, cls))
 

@@ -1,8 +1,8 @@
 """Mitsuba plugin classes (installed as ``mi_dsbrdf.plugins``).
 
 Only Mitsuba glue lives here: each plugin reads its XML properties, holds its
-parameters as Dr.Jit arrays and calls the library (:mod:`mi_dsbrdf.dsbrdf`,
-:mod:`mi_dsbrdf.measured`, :mod:`mi_dsbrdf.sampling`) to evaluate and sample.
+parameters as Dr.Jit arrays and calls the library (:mod:`mi_dsbrdf.brdf.dsbrdf`,
+:mod:`mi_dsbrdf.brdf.measured`, :mod:`mi_dsbrdf.brdf.sampling`) to evaluate and sample.
 
 A Python subclass of ``mi.BSDF`` binds to the variant active when its class
 statement runs, so the plugin modules are (re)loaded once per variant.

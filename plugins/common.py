@@ -1,9 +1,9 @@
 """Glue shared by the BSDF plugins: Mitsuba types around the library's
-sampling mixture (:mod:`mi_dsbrdf.sampling`); no model code."""
+sampling mixture (:mod:`mi_dsbrdf.brdf.sampling`); no model code."""
 import drjit as dr
 import mitsuba as mi
 
-from mi_dsbrdf.sampling import mixture_pdf, mixture_sample
+from mi_dsbrdf.brdf.sampling import mixture_pdf, mixture_sample
 
 
 def both_above(si, wo, active):

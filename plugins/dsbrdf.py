@@ -1,6 +1,6 @@
 """``dsbrdf``: the Directional-Statistics BRDF as a Mitsuba BSDF.
 
-XML (see :func:`mi_dsbrdf.library.material_from_params` for all forms)::
+XML (see :func:`mi_dsbrdf.model.library.material_from_params` for all forms)::
 
     <bsdf type="dsbrdf"/>                                   model mean material
     <bsdf type="dsbrdf"><string name="filename" value="material.json"/></bsdf>
@@ -15,18 +15,18 @@ XML (see :func:`mi_dsbrdf.library.material_from_params` for all forms)::
 Differentiable parameters (``mi.traverse``): ``log_kappa`` and ``log_gamma``
 (R*6 spline control values, lobe-major) or, for a basis material, ``psi``
 (k coefficients); and ``chromaticity`` (R*3, lobe-major). The formula and its
-numerical guards are :func:`mi_dsbrdf.dsbrdf.lobe_rgb`; sampling is
-:mod:`mi_dsbrdf.sampling`, with the mixture built from detached parameters so
+numerical guards are :func:`mi_dsbrdf.brdf.dsbrdf.lobe_rgb`; sampling is
+:mod:`mi_dsbrdf.brdf.sampling`, with the mixture built from detached parameters so
 that sampled directions do not depend on them.
 """
 import drjit as dr
 import mitsuba as mi
 
-from mi_dsbrdf.angles import cos_half_diff, log_cos_h
-from mi_dsbrdf.curves import N_CONTROL
-from mi_dsbrdf.dsbrdf import clamp_controls, lobe_curves, lobe_rgb
-from mi_dsbrdf.library import material_from_params
-from mi_dsbrdf.sampling import dsbrdf_weights
+from mi_dsbrdf.brdf.angles import cos_half_diff, log_cos_h
+from mi_dsbrdf.brdf.curves import N_CONTROL
+from mi_dsbrdf.brdf.dsbrdf import clamp_controls, lobe_curves, lobe_rgb
+from mi_dsbrdf.model.library import material_from_params
+from mi_dsbrdf.brdf.sampling import dsbrdf_weights
 
 from .common import both_above, pdf_of_mixture, sample_mixture
 

@@ -9,16 +9,16 @@ The ground truth of the synthetic experiments. XML::
         <string name="interpolation" value="linear"/>   (or "nearest")
     </bsdf>
 
-Lookup: :func:`mi_dsbrdf.measured.lookup_indices` (the table's own index
-arithmetic); sampling: :mod:`mi_dsbrdf.sampling` with lobes fitted to the table
-(:meth:`~mi_dsbrdf.measured.MeasuredBRDF.sampling_lobes`).
+Lookup: :func:`mi_dsbrdf.brdf.measured.lookup_indices` (the table's own index
+arithmetic); sampling: :mod:`mi_dsbrdf.brdf.sampling` with lobes fitted to the table
+(:meth:`~mi_dsbrdf.brdf.measured.MeasuredBRDF.sampling_lobes`).
 """
 import drjit as dr
 import mitsuba as mi
 
-from mi_dsbrdf.angles import half_diff
+from mi_dsbrdf.brdf.angles import half_diff
 from mi_dsbrdf.errors import MeasuredFileError
-from mi_dsbrdf.measured import MeasuredBRDF, is_linear, lookup_indices
+from mi_dsbrdf.brdf.measured import MeasuredBRDF, is_linear, lookup_indices
 
 from .common import both_above, pdf_of_mixture, sample_mixture
 

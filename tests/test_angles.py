@@ -1,7 +1,7 @@
 import numpy as np
 import mitsuba as mi
 
-from mi_dsbrdf.angles import cos_half_diff, fold_phi_d, from_half_diff, half_diff, log_cos_h
+from mi_dsbrdf.brdf.angles import cos_half_diff, fold_phi_d, from_half_diff, half_diff, log_cos_h
 
 
 def random_angles(n, seed=0):

@@ -1,8 +1,8 @@
 """Lambert + Cook-Torrance, the comparison model of the reports."""
 import numpy as np
 
-from mi_dsbrdf import fitting
-from mi_dsbrdf.baselines import cook_torrance, fit_cook_torrance
+from mi_dsbrdf.model import fitting
+from mi_dsbrdf.model.baselines import cook_torrance, fit_cook_torrance
 
 
 def test_cook_torrance_fit_recovers_a_known_one_lobe_model():

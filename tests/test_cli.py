@@ -7,8 +7,8 @@ import sys
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.cli import main
-from mi_dsbrdf.scenes import SCENE_DIR
+from mi_dsbrdf.app.cli import main
+from mi_dsbrdf.app.scenes import SCENE_DIR
 
 
 def test_demo_recovers_and_reports_and_never_overwrites(tmp_path):
@@ -22,7 +22,7 @@ def test_demo_recovers_and_reports_and_never_overwrites(tmp_path):
               "recovered/illumination.exr", "recovered/scene.xml"):
         assert (out / f).stat().st_size > 0, f
     before = (out / "report.json").stat().st_mtime_ns
-    r = subprocess.run([sys.executable, "-m", "mi_dsbrdf.cli", "demo", "--out", str(out)],
+    r = subprocess.run([sys.executable, "-m", "mi_dsbrdf.app.cli", "demo", "--out", str(out)],
                        capture_output=True, text=True)
     assert r.returncode != 0 and "--force" in r.stderr
     assert (out / "report.json").stat().st_mtime_ns == before
@@ -60,7 +60,7 @@ def test_bad_map_size_is_a_usage_error(tmp_path, capsys):
 def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys):
     existing = tmp_path / "model.npz"
     existing.write_bytes(b"keep me")
-    r = subprocess.run([sys.executable, "-m", "mi_dsbrdf.cli", "build-model", "--merl", str(tmp_path),
+    r = subprocess.run([sys.executable, "-m", "mi_dsbrdf.app.cli", "build-model", "--merl", str(tmp_path),
                         "--out", str(existing)], capture_output=True, text=True)
     assert r.returncode != 0 and "--force" in r.stderr
     assert existing.read_bytes() == b"keep me"

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf import Material, MaterialError, load_material
-from mi_dsbrdf.angles import from_half_diff, half_diff, log_cos_h
-from mi_dsbrdf.dsbrdf import lobe_rgb
+from mi_dsbrdf.brdf.angles import from_half_diff, half_diff, log_cos_h
+from mi_dsbrdf.brdf.dsbrdf import lobe_rgb
 
 GAMMAS = [1.0, 10.0, 100.0, 1e3, 1e4]
 KAPPAS = [1e-6, 1e-3, 0.1, 1.0, 10.0, 40.0, 80.0]

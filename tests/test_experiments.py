@@ -1,5 +1,5 @@
 """The experiment runner (benchmarks/experiments.py), one case at a time
-(mi_dsbrdf.evaluation), the Adam baseline and the report, on tiny cases."""
+(mi_dsbrdf.evaluation.experiment), the Adam baseline and the report, on tiny cases."""
 import json
 import os
 import sys
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from conftest import data_path
-from mi_dsbrdf import evaluation as ev
-from mi_dsbrdf import model_data
-from mi_dsbrdf.fitting import samples_from_function
+from mi_dsbrdf.evaluation import experiment as ev
+from mi_dsbrdf.model import model_file as model_data
+from mi_dsbrdf.model.fitting import samples_from_function
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
 
@@ -48,8 +48,8 @@ def test_bsdf_values_of_the_plugin_match_the_material():
 
 
 def test_adam_baseline_lowers_its_loss():
-    from mi_dsbrdf.adam_inverse import adam_recover
-    from mi_dsbrdf.illumination import procedural_sky
+    from mi_dsbrdf.evaluation.adam import adam_recover
+    from mi_dsbrdf.inference.latlong import procedural_sky
     ts = ev.texels({"type": "dsbrdf", "material": "gold-metallic-paint"}, 24, (16, 32))
     img = ev.render(ts, procedural_sky(16, 32).reshape(-1, 3))
     fit = adam_recover(img, ts.mask, 24, (8, 16), "principled-adam", spp=4, iters=20)
@@ -128,7 +128,7 @@ def test_prior_tuning_keeps_test_materials_out_and_picks_the_lowest_geometric_me
 
 def test_config_defaults_are_the_tuned_prior_weights():
     """inference.Config's prior weights are the ones the committed sweep chose."""
-    from mi_dsbrdf import inference
+    from mi_dsbrdf.inference import envmap as inference
     import tune_priors
     with open(tune_priors.RESULT) as f:
         tuned = json.load(f)

@@ -4,9 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from mi_dsbrdf import Material, fitting
-from mi_dsbrdf.measured import MeasuredBRDF, eval_nbrdf, load_nbrdf_weights
-from mi_dsbrdf.metrics import log_rmse
+from mi_dsbrdf import Material
+from mi_dsbrdf.model import fitting
+from mi_dsbrdf.brdf.measured import MeasuredBRDF, eval_nbrdf, load_nbrdf_weights
+from mi_dsbrdf.evaluation.metrics import log_rmse
 
 # a coarse slice of the grid keeps each fit to a few seconds
 SUBSET = dict(theta_d_step=6, phi_d_step=30)
@@ -74,7 +75,7 @@ def test_fit_recovers_known_dsbrdf_on_merl_grid():
 
 
 def test_basis_fit_recovers_psi_and_chromaticity():
-    from mi_dsbrdf.curves import CurveBasis
+    from mi_dsbrdf.brdf.curves import CurveBasis
     rng = np.random.default_rng(3)
     mean = known_material()
     basis = CurveBasis(np.stack([mean.log_kappa, mean.log_gamma], axis=1), rng.normal(0, 0.15, (4, 3, 2, 6)))
@@ -103,7 +104,7 @@ def test_fits_of_stiff_merl_materials_converge(nbrdf_file):
 
 
 def test_scale_invariant_error_finds_the_scale_and_ignores_it():
-    from mi_dsbrdf.metrics import log_rmse, log_rmse_scale_invariant
+    from mi_dsbrdf.evaluation.metrics import log_rmse, log_rmse_scale_invariant
     rng = np.random.default_rng(0)
     truth = np.exp(rng.normal(0, 1.5, (500, 3)))
     cos_i = rng.uniform(0.1, 1.0, 500)

@@ -3,8 +3,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.forward import TexelSum, unseen_texels
-from mi_dsbrdf.illumination import latlong_directions
+from mi_dsbrdf.inference.forward import TexelSum, unseen_texels
+from mi_dsbrdf.inference.latlong import latlong_directions
 
 PSI = np.array([0.5, -0.3, 0.2, 0, 0, 0, 0, 0, 0, 0.1])
 
@@ -80,7 +80,7 @@ def test_reflectance_gradient_matches_finite_differences():
 
 
 def test_visibility_of_a_non_convex_object_matches_monte_carlo():
-    from mi_dsbrdf.scenes import scene_path
+    from mi_dsbrdf.app.scenes import scene_path
     env = smooth_map()
     s = mi.load_file(scene_path("torus_envmap"), res="32", spp="256")
     obj = [sh for sh in s.shapes() if sh.is_mesh()][0]

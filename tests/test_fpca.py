@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from mi_dsbrdf.curves import spline_matrix
-from mi_dsbrdf.fpca import fpca, gram_matrix, l2_inner
+from mi_dsbrdf.brdf.curves import spline_matrix
+from mi_dsbrdf.model.fpca import fpca, gram_matrix, l2_inner
 
 
 def training_curves(M=30, seed=0):

@@ -4,10 +4,11 @@ import math
 import numpy as np
 import pytest
 
-from mi_dsbrdf import inference, model_data
-from mi_dsbrdf.dsbrdf import Material
-from mi_dsbrdf.forward import TexelSum
-from mi_dsbrdf.scenes import sphere_scene
+from mi_dsbrdf.inference import envmap as inference
+from mi_dsbrdf.model import model_file as model_data
+from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.app.scenes import sphere_scene
 
 TRUTH = "gold-metallic-paint"
 RES = 24
@@ -90,7 +91,7 @@ def test_unknown_point_light_at_a_finite_distance_within_a_degree():
 
 
 def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
-    from mi_dsbrdf.illumination import procedural_sky
+    from mi_dsbrdf.inference.latlong import procedural_sky
     sky = procedural_sky(16, 32).astype(np.float64)
     s = sphere({"type": "dsbrdf", "material": TRUTH})
     ts = TexelSum(s, s.shapes()[0], (16, 32))

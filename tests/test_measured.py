@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf import MeasuredFileError
-from mi_dsbrdf.angles import from_half_diff, half_diff
-from mi_dsbrdf.measured import (FILE_BYTES, SCALE, SHAPE, MeasuredBRDF, eval_nbrdf, grid_angles,
+from mi_dsbrdf.brdf.angles import from_half_diff, half_diff
+from mi_dsbrdf.brdf.measured import (FILE_BYTES, SCALE, SHAPE, MeasuredBRDF, eval_nbrdf, grid_angles,
                                 load_nbrdf_weights, nbrdf_names)
 
 

@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 
 import mi_dsbrdf
-from mi_dsbrdf import ModelError, build_model, model_data
-from mi_dsbrdf.library import library_names, load_material
-from mi_dsbrdf.model_data import load_model
+from mi_dsbrdf import ModelError
+from mi_dsbrdf.model import build as build_model
+from mi_dsbrdf.model import model_file as model_data
+from mi_dsbrdf.model.library import library_names, load_material
+from mi_dsbrdf.model.model_file import load_model
 
 from test_fpca import training_curves
 
@@ -113,19 +115,19 @@ def test_library_material_by_name_renders_like_explicit_parameters():
 
 def test_bare_dsbrdf_is_the_model_mean():
     m = shipped()
-    d = mi_dsbrdf.library.default_material()
+    d = mi_dsbrdf.model.library.default_material()
     np.testing.assert_allclose(d.log_kappa, m.basis.mean[:, 0])
 
 
 def test_shipped_library_matches_the_measurements(nbrdf_file):
     """Rebuilding one library entry from the data reproduces its stored error."""
-    from mi_dsbrdf import fitting
+    from mi_dsbrdf.model import fitting
     m = shipped()
     names = [str(n) for n in m.arrays["library_names"]]
     i = names.index("pink-felt")
     s = build_model.load_samples(nbrdf_file, "pink-felt")
     mat = m.library_material("pink-felt")
-    from mi_dsbrdf.metrics import log_rmse
+    from mi_dsbrdf.evaluation.metrics import log_rmse
     err = log_rmse(mat.eval(s.theta_h, s.theta_d), s.values, s.cos_i)
     assert err == pytest.approx(float(m.arrays["library_error"][i]), rel=1e-4)
     assert err < 0.05

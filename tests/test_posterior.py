@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from mi_dsbrdf.posterior import log_likelihood_terms
-from mi_dsbrdf.priors import EntropyPrior, GradientPrior
+from mi_dsbrdf.inference.likelihood import log_likelihood_terms
+from mi_dsbrdf.model.priors import EntropyPrior, GradientPrior
 
 
 def finite_differences(f, x, h=1e-6):
@@ -84,10 +84,11 @@ def test_entropy_prior_prefers_peaky_illumination_and_ignores_scale():
 def test_posterior_illumination_terms_gradient_matches_finite_differences():
     """The sum the illumination block minimises (likelihood + entropy + gradient
     priors through the transport), against central differences in log L."""
-    from mi_dsbrdf import inference, model_data
-    from mi_dsbrdf.forward import TexelSum, unseen_texels
-    from mi_dsbrdf.illumination import procedural_sky
-    from mi_dsbrdf.scenes import sphere_scene
+    from mi_dsbrdf.inference import envmap as inference
+    from mi_dsbrdf.model import model_file as model_data
+    from mi_dsbrdf.inference.forward import TexelSum, unseen_texels
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    from mi_dsbrdf.app.scenes import sphere_scene
     s = sphere_scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, 12)
     ts = TexelSum(s, s.shapes()[0], (4, 8))
     observed = np.zeros((144, 3))
@@ -113,9 +114,10 @@ def test_prior_weights_follow_the_observed_pixel_count():
     """The likelihood sums over pixels, so the priors are weighted by observed pixels /
     PRIOR_PIXELS: half the pixels masked out halves every prior term, and the Config
     weights apply as given at PRIOR_PIXELS."""
-    from mi_dsbrdf import inference, model_data
-    from mi_dsbrdf.forward import TexelSum
-    from mi_dsbrdf.scenes import sphere_scene
+    from mi_dsbrdf.inference import envmap as inference
+    from mi_dsbrdf.model import model_file as model_data
+    from mi_dsbrdf.inference.forward import TexelSum
+    from mi_dsbrdf.app.scenes import sphere_scene
     s = sphere_scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, 12)
     ts = TexelSum(s, s.shapes()[0], (4, 8))
     observed = np.ones((12, 12, 3))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from mi_dsbrdf.priors import (GaussianMixture, HuePrior, fit_gmm, fit_hue_concentration, hue_cosines,
+from mi_dsbrdf.model.priors import (GaussianMixture, HuePrior, fit_gmm, fit_hue_concentration, hue_cosines,
                               select_gmm)
 
 

@@ -7,9 +7,9 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mi_dsbrdf.cli import main
-from mi_dsbrdf.illumination import write_exr
-from mi_dsbrdf.scenes import scene_path
+from mi_dsbrdf.app.cli import main
+from mi_dsbrdf.inference.latlong import write_exr
+from mi_dsbrdf.app.scenes import scene_path
 
 RES = 32
 
@@ -109,7 +109,7 @@ def test_point_light_and_envmap_scenes(tmp_path):
     np.testing.assert_allclose(np.linalg.norm(light["position"]), np.linalg.norm([2.5, 2.0, 3.0]), rtol=1e-6)
     assert "point" in (out / "scene.xml").read_text()
 
-    from mi_dsbrdf.scenes import SCENE_DIR
+    from mi_dsbrdf.app.scenes import SCENE_DIR
     torus = open(scene_path("torus_envmap")).read().replace('name="res" value="128"', 'name="res" value="24"')
     (tmp_path / "meshes").mkdir()
     import shutil

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf import ModelError
-from mi_dsbrdf.model_data import load_model
-from mi_dsbrdf.scenes import SCENES, scene_path
+from mi_dsbrdf.model.model_file import load_model
+from mi_dsbrdf.app.scenes import SCENES, scene_path
 
 
 def write_model(path, k=3, lobes=2, **override):
@@ -81,7 +81,7 @@ def test_shipped_scenes_render(name):
 
 
 def test_scene_with_merl_material_renders(tmp_path):
-    from mi_dsbrdf.measured import MeasuredBRDF
+    from mi_dsbrdf.brdf.measured import MeasuredBRDF
     from tests_support import glossy_function
     path = tmp_path / "m.binary"
     MeasuredBRDF.from_function(glossy_function, name="m").to_binary(path)

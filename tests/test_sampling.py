@@ -6,8 +6,8 @@ import pytest
 from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
 
 from mi_dsbrdf import Material
-from mi_dsbrdf.measured import MeasuredBRDF
-from mi_dsbrdf.sampling import dsbrdf_weights, mixture_pdf, mixture_sample
+from mi_dsbrdf.brdf.measured import MeasuredBRDF
+from mi_dsbrdf.brdf.sampling import dsbrdf_weights, mixture_pdf, mixture_sample
 
 GLOSSY = Material.from_curves([[0.5] * 6, [3.0, 3.0, 3.5, 4.0, 6.0, 9.0]],
                               [[1.5] * 6, [400, 350, 300, 250, 200, 150]],
@@ -68,7 +68,7 @@ def test_sample_weights_are_unbiased_against_quadrature(material, tmp_path):
     bsdf = mi.load_dict({"type": "dsbrdf", "filename": str(path)})
     wi = np.array(wi_at(35.0))
     dirs, dw = hemisphere_quadrature()
-    from mi_dsbrdf.angles import half_diff
+    from mi_dsbrdf.brdf.angles import half_diff
     th, _, td, _ = half_diff(tuple(np.repeat(wi[:, None], dirs.shape[1], 1)), tuple(dirs))
     albedo_ref = (material.eval(th, td) * (dirs[2] * dw)[:, None]).sum(0)
 

@@ -3,8 +3,8 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mi_dsbrdf.scene_needs import SceneError, decide
-from mi_dsbrdf.scenes import scene_path
+from mi_dsbrdf.inference.scene_needs import SceneError, decide
+from mi_dsbrdf.app.scenes import scene_path
 
 
 def colour_image(n=8):

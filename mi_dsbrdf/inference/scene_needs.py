@@ -18,7 +18,7 @@ import dataclasses
 
 import numpy as np
 
-from .errors import MiDsbrdfError
+from mi_dsbrdf.errors import MiDsbrdfError
 
 GREY_TOLERANCE = 1e-3
 

@@ -23,9 +23,9 @@ import os
 
 import numpy as np
 
-from .angles import fold_phi_d
-from .errors import MeasuredFileError
-from .xp import ops
+from mi_dsbrdf.brdf.angles import fold_phi_d
+from mi_dsbrdf.errors import MeasuredFileError
+from mi_dsbrdf.brdf.xp import ops
 
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
 SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
@@ -155,7 +155,7 @@ class MeasuredBRDF:
         (theta_d < 30 deg, mean over phi_d): a sharp lobe whose exponent puts half
         its height at the profile's half maximum above the diffuse floor, and a
         broader one (exponent / 10) for the shoulder. Returns ``(w_cos, weights,
-        exponents)`` (Python floats) for :mod:`mi_dsbrdf.sampling`.
+        exponents)`` (Python floats) for :mod:`mi_dsbrdf.brdf.sampling`.
         """
         th, _, _ = grid_angles()
         lum = self.table[:, :30].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])

@@ -2,7 +2,7 @@
 
     rho_lambda(theta_d, theta_h) = sum_r c_{r,lambda} (exp[kappa_r(theta_d) cos^{gamma_r(theta_d)} theta_h] - 1)
 
-with R lobes, each a pair of log-spline curves (:mod:`mi_dsbrdf.curves`) and a
+with R lobes, each a pair of log-spline curves (:mod:`mi_dsbrdf.brdf.curves`) and a
 chromaticity c_r (non-negative RGB weights that sum to one; the magnitude lives
 in kappa). Values are in 1/sr.
 
@@ -22,10 +22,10 @@ import os
 
 import numpy as np
 
-from .angles import log_cos_h
-from .curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
-from .errors import MaterialError
-from .xp import expm1, ops
+from mi_dsbrdf.brdf.angles import log_cos_h
+from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
+from mi_dsbrdf.errors import MaterialError
+from mi_dsbrdf.brdf.xp import expm1, ops
 
 MAX_LOBES = 3
 KAPPA_MAX = 85.0
@@ -129,7 +129,7 @@ class Material:
 
     @classmethod
     def from_basis(cls, basis, psi, chromaticity, **kw):
-        """From coefficients ``psi`` of a learned :class:`~mi_dsbrdf.curves.CurveBasis`
+        """From coefficients ``psi`` of a learned :class:`~mi_dsbrdf.brdf.curves.CurveBasis`
         (control values clamped by :func:`clamp_controls`)."""
         ctrl = basis.control_values(psi)
         log_kappa, log_gamma = clamp_controls(ctrl[:, 0], ctrl[:, 1])

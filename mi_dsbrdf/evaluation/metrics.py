@@ -70,8 +70,8 @@ def log_rmse_scale_invariant(model_values, measured_values, cos_i) -> tuple:
 
 def material_error(material, samples, scale_invariant=True) -> float:
     """Eq. 20 (or Eq. 5) of a material (anything with ``.eval(theta_h, theta_d)``,
-    e.g. :class:`~mi_dsbrdf.dsbrdf.Material`) against measured
-    :class:`~mi_dsbrdf.fitting.Samples`."""
+    e.g. :class:`~mi_dsbrdf.brdf.dsbrdf.Material`) against measured
+    :class:`~mi_dsbrdf.model.fitting.Samples`."""
     values = material.eval(samples.theta_h, samples.theta_d)
     if scale_invariant:
         return log_rmse_scale_invariant(values, samples.values, samples.cos_i)[0]

@@ -28,7 +28,7 @@ def save_preview(image, path, exposure=0.0) -> None:
 
 def render_to_files(scene_file, out_stem, spp=None, **params) -> dict:
     """Render and write ``<out_stem>.exr`` and ``<out_stem>.png``; returns paths and time."""
-    from .illumination import write_exr
+    from mi_dsbrdf.inference.latlong import write_exr
     t0 = time.perf_counter()
     img = render_scene(scene_file, spp=spp, **params)
     seconds = time.perf_counter() - t0
@@ -42,9 +42,9 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
     ``envmap_file`` with Mitsuba's path tracer; writes ``out_file`` (EXR) and a
     PNG beside it. ``material_file``: a material.json or a library name."""
     import mitsuba as mi
-    from .errors import MiDsbrdfError
-    from .library import library_names
-    from .scenes import camera, shape_dict
+    from mi_dsbrdf.errors import MiDsbrdfError
+    from mi_dsbrdf.model.library import library_names
+    from mi_dsbrdf.app.scenes import camera, shape_dict
     bsdf = {"type": "dsbrdf"}
     if os.path.exists(os.fspath(material_file)):
         bsdf["filename"] = os.path.abspath(os.fspath(material_file))
@@ -63,7 +63,7 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
     img = np.array(mi.render(scene, spp=spp), dtype=np.float32)
     if not np.all(np.isfinite(img)):
         raise FloatingPointError("relighting produced non-finite pixels")
-    from .illumination import write_exr
+    from mi_dsbrdf.inference.latlong import write_exr
     write_exr(out_file, img)
     png = os.path.splitext(os.fspath(out_file))[0] + ".png"
     save_preview(img, png)

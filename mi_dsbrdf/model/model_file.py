@@ -16,7 +16,7 @@ and the priors
     hue_kappa   ()                                                  Eq. 7-12
 
 plus what the build keeps for leave-one-out rebuilds and reports (written by
-:mod:`mi_dsbrdf.build_model`): ``fpca_bases``, ``fpca_variance``, the full fits
+:mod:`mi_dsbrdf.model.build`): ``fpca_bases``, ``fpca_variance``, the full fits
 ``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_error``, ``fit_flags``,
 ``library_error``, ``excluded`` and ``build_info`` (JSON).
 """
@@ -28,12 +28,12 @@ import os
 
 import numpy as np
 
-from .curves import CurveBasis
-from .dsbrdf import Material
-from .errors import MaterialError, ModelError
-from .priors import GaussianMixture, HuePrior
+from mi_dsbrdf.brdf.curves import CurveBasis
+from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.errors import MaterialError, ModelError
+from mi_dsbrdf.model.priors import GaussianMixture, HuePrior
 
-SHIPPED = os.path.join(os.path.dirname(__file__), "data", "model.npz")
+SHIPPED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "model.npz")
 REQUIRED = ("knots", "mean", "bases", "library_names", "library_psi", "library_chroma")
 
 

@@ -240,7 +240,7 @@ def fit_hue_concentration(chromaticities, min_saturation=0.02) -> tuple:
 
 def _texel_weights(height, width):
     """(H, W) solid angles normalised to sum to one."""
-    from .illumination import texel_solid_angles
+    from mi_dsbrdf.inference.latlong import texel_solid_angles
     w = texel_solid_angles(height, width)
     return w / w.sum()
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .illumination import latlong_directions, texel_solid_angles
+from mi_dsbrdf.inference.latlong import latlong_directions, texel_solid_angles
 
 #: Pixel-texel pairs evaluated per Dr.Jit launch (memory / speed trade-off).
 CHUNK = 1 << 22

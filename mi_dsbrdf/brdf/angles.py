@@ -2,7 +2,7 @@
 
 Directions are unit vectors in the local shading frame (normal = +z), given as
 three arrays ``(x, y, z)``: numpy float64 arrays or Dr.Jit arrays (the same code
-runs on both, see :mod:`mi_dsbrdf.xp`). All angles are in radians.
+runs on both, see :mod:`mi_dsbrdf.brdf.xp`). All angles are in radians.
 
     h = (wi + wo) / |wi + wo|                     half vector, angles (theta_h, phi_h)
     d = R_y(-theta_h) R_z(-phi_h) wi              difference vector, (theta_d, phi_d)
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from .xp import log1p, ops
+from mi_dsbrdf.brdf.xp import log1p, ops
 
 
 def half_vector(wi, wo):

@@ -4,7 +4,7 @@ The negative log posterior (Eq. 18) of the DSBRDF variables (psi, chromaticity)
 and the log illumination map x = log L is minimised by alternating two blocks:
 
 * illumination: reflectance fixed, the image is linear in L (I = T L, T from
-  :class:`~mi_dsbrdf.forward.TexelSum`), so each evaluation is a product with T;
+  :class:`~mi_dsbrdf.inference.forward.TexelSum`), so each evaluation is a product with T;
   L-BFGS-B on x with the likelihood (Eq. 19) and the entropy and gradient priors
   (Eq. 13-16). Texels no observed pixel sees are masked and left black.
 * reflectance: illumination fixed; Levenberg-Marquardt with reweighted
@@ -19,7 +19,7 @@ short grey illumination block and a short reflectance block; the best starts
 the rounds. Rounds of the two blocks continue until the negative log posterior
 changes by less than ``tol`` (relative). Two passes: grey illumination first
 (one map shared by the channels: the grey-world assumption), then colour from
-that start, unless the image is grey (:mod:`mi_dsbrdf.scene_needs` decides).
+that start, unless the image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides).
 A point or directional light (:func:`recover_light`) replaces the illumination
 block by Powell's method on its direction and intensity.
 """
@@ -31,10 +31,10 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from .fitting import chroma_logits, softmax_chroma
-from .forward import TexelSum, apply_transport, transport_adjoint, unseen_texels
-from .posterior import LOG_OFFSET, log_likelihood_terms
-from .priors import EntropyPrior, GradientPrior
+from mi_dsbrdf.model.fitting import chroma_logits, softmax_chroma
+from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint, unseen_texels
+from mi_dsbrdf.inference.likelihood import LOG_OFFSET, log_likelihood_terms
+from mi_dsbrdf.model.priors import EntropyPrior, GradientPrior
 
 #: bound of the chromaticity variables (softmax logits): c >= ~e^-6 / 2
 CHROMA_LIMIT = 6.0
@@ -338,7 +338,7 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
     Returns (psi, logits), or with ``fit_scale`` (psi, logits, scaled L), or with
     ``direction`` also (theta, phi).
     """
-    from .posterior import KINK
+    from mi_dsbrdf.inference.likelihood import KINK
     k, R = psi.size, logits.shape[0]
     dr = post._dr
     view = post.refl
@@ -428,7 +428,7 @@ def _reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=N
 # --- point / directional light (paper §5: Powell's method) -----------------------------
 
 def direction_from_angles(theta, phi) -> np.ndarray:
-    """World direction (y up, the lat-long convention of :mod:`mi_dsbrdf.illumination`)."""
+    """World direction (y up, the lat-long convention of :mod:`mi_dsbrdf.inference.latlong`)."""
     st = np.sin(theta)
     return np.array([st * np.sin(phi), np.cos(theta), -st * np.cos(phi)])
 

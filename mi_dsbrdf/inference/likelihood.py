@@ -3,7 +3,7 @@
     -log p(R, L | I) = likelihood (Eq. 19) + reflectance priors (Eq. 6, 12)
                        + illumination priors (Eq. 13-16) + const
 
-This module holds the likelihood; the priors are in :mod:`mi_dsbrdf.priors`.
+This module holds the likelihood; the priors are in :mod:`mi_dsbrdf.model.priors`.
 Each term is a function returning (value, gradient) in float64, so that the
 inference loop adds them to the gradients Dr.Jit returns for the rendering.
 """

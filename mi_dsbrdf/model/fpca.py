@@ -18,7 +18,7 @@ import dataclasses
 
 import numpy as np
 
-from .curves import DEFAULT_KNOTS, N_CONTROL, CurveBasis, check_knots, spline_matrix
+from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, CurveBasis, check_knots, spline_matrix
 
 
 def gram_matrix(knots=DEFAULT_KNOTS) -> np.ndarray:

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from .xp import ops
+from mi_dsbrdf.brdf.xp import ops
 
 DEGREE = 2
 N_CONTROL = 6

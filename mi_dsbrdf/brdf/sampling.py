@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import math
 
-from .angles import cos_half_diff, log_cos_h
-from .xp import expm1, ops
+from mi_dsbrdf.brdf.angles import cos_half_diff, log_cos_h
+from mi_dsbrdf.brdf.xp import expm1, ops
 
 W_COS = 0.15            # defensive share of cosine-hemisphere sampling
 EXPONENT_MAX = 1e6

@@ -7,7 +7,7 @@ Two BSDFs share one loop (:func:`adam_recover`):
   metallic, specular), the baseline of the experiments report;
 * ``dsbrdf-adam``: the ``dsbrdf`` plugin's basis coefficients psi and lobe
   chromaticities, which isolates the optimiser and the Monte Carlo gradients
-  from the model when compared with :func:`mi_dsbrdf.inference.recover`.
+  from the model when compared with :func:`mi_dsbrdf.inference.envmap.recover`.
 
 The illumination is an ``envmap`` whose log radiance is an Adam variable
 (positive by construction); the loss is the Laplacian likelihood on log pixel
@@ -26,7 +26,7 @@ LR_BSDF, LR_MAP = 0.02, 0.05
 
 def _scene(bsdf, res, map_hw, shape, level):
     import mitsuba as mi
-    from .scenes import camera, shape_dict
+    from mi_dsbrdf.app.scenes import camera, shape_dict
     H, W = map_hw
     env = mi.Bitmap(np.full((H, W, 3), level, dtype=np.float32))
     return mi.load_dict({"type": "scene", "integrator": {"type": "prb", "max_depth": 2 if shape == "sphere" else 3},
@@ -88,7 +88,7 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     params.update(opt)
     env = np.array(params["emitter.data"], np.float64)[:, 1:-1, :3]
     if method == "dsbrdf-adam":
-        from .dsbrdf import Material
+        from mi_dsbrdf.brdf.dsbrdf import Material
         psi = np.array(params["object.bsdf.psi"], np.float64)
         chroma = np.array(params["object.bsdf.chromaticity"], np.float64).reshape(R, 3)
         fitted = Material.from_basis(model.basis, psi, chroma)

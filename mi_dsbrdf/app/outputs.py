@@ -54,9 +54,9 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
     from the upper left, from the side (grazing angles) and by the shipped
     procedural sky."""
     import mitsuba as mi
-    from .illumination import procedural_sky
-    from .render import save_preview
-    from .scenes import camera
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    from mi_dsbrdf.app.render import save_preview
+    from mi_dsbrdf.app.scenes import camera
     lights = [{"type": "directional", "direction": [0.5, -0.6, -0.62], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "directional", "direction": [-1.0, -0.3, 0.1], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "envmap", "bitmap": mi.Bitmap(procedural_sky(64, 128))}]
@@ -74,7 +74,7 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
 def illumination_preview(log_map_or_map, path, seen=None, scale=8) -> None:
     """PNG of a lat-long map (nearest-neighbour enlarged ``scale`` times), its
     exposure set by the median of the seen texels; unseen texels hatched grey."""
-    from .render import save_preview
+    from mi_dsbrdf.app.render import save_preview
     L = np.asarray(log_map_or_map, dtype=np.float64)
     seen = np.ones(L.shape[:2], bool) if seen is None else np.asarray(seen, bool)
     med = np.median(L[seen].mean(axis=-1)) if seen.any() else 1.0

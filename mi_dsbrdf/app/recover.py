@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from .errors import MiDsbrdfError
+from mi_dsbrdf.errors import MiDsbrdfError
 
 
 class InputError(MiDsbrdfError):
@@ -88,13 +88,14 @@ def recover_files(scene_file, image_file, out, mask_file=None, force=False, map_
     """Run the whole recovery and write the result directory; returns the log dict."""
     import mitsuba as mi
 
-    from . import inference, model_data
-    from .dsbrdf import Material
-    from .forward import TexelSum
-    from .illumination import write_exr
-    from .outputs import illumination_preview, material_preview, write_scene_xml
-    from .render import save_preview
-    from .scene_needs import decide, dsbrdf_object
+    from mi_dsbrdf.inference import envmap as inference
+    from mi_dsbrdf.model import model_file as model_data
+    from mi_dsbrdf.brdf.dsbrdf import Material
+    from mi_dsbrdf.inference.forward import TexelSum
+    from mi_dsbrdf.inference.latlong import write_exr
+    from mi_dsbrdf.app.outputs import illumination_preview, material_preview, write_scene_xml
+    from mi_dsbrdf.app.render import save_preview
+    from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
     for f, what in ((scene_file, "scene"), (image_file, "image")):
         if not os.path.exists(f):
             raise InputError("%s file %s does not exist" % (what, f))

@@ -26,7 +26,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from .errors import MeasuredFileError, ModelError
+from mi_dsbrdf.errors import MeasuredFileError, ModelError
 
 DEFAULT_K = 10
 SEED = 0
@@ -45,13 +45,14 @@ def source_names(source) -> list:
     if not os.path.exists(source):
         raise MeasuredFileError("MERL source %s does not exist (give a merl_nbrdf_weights.npz or a folder "
                                 "of .binary files)" % source)
-    from .measured import nbrdf_names
+    from mi_dsbrdf.brdf.measured import nbrdf_names
     return nbrdf_names(source)
 
 
 def load_samples(source, name, subset=None):
-    """:class:`~mi_dsbrdf.fitting.Samples` of one material of a source."""
-    from . import fitting, measured
+    """:class:`~mi_dsbrdf.model.fitting.Samples` of one material of a source."""
+    from mi_dsbrdf.model import fitting
+    from mi_dsbrdf.brdf import measured
     source = os.fspath(source)
     if os.path.isdir(source):
         return fitting.samples_from_table(measured.MeasuredBRDF.from_binary(os.path.join(source, name + ".binary")),
@@ -68,7 +69,7 @@ def source_kind(source) -> str:
 
 def _fit_full_job(args):
     source, name = args
-    from .fitting import fit_full
+    from mi_dsbrdf.model.fitting import fit_full
     t0 = time.perf_counter()
     f = fit_full(load_samples(source, name))
     return name, f.variables, f.material.chromaticity, f.error, f.at_bounds, time.perf_counter() - t0
@@ -76,8 +77,8 @@ def _fit_full_job(args):
 
 def _fit_basis_job(args):
     source, name, mean, bases, knots, psi0, chroma0 = args
-    from .curves import CurveBasis
-    from .fitting import fit_basis
+    from mi_dsbrdf.brdf.curves import CurveBasis
+    from mi_dsbrdf.model.fitting import fit_basis
     f = fit_basis(load_samples(source, name), CurveBasis(mean, bases, knots), psi0, chroma0)
     return name, f.variables, f.material.chromaticity, f.error
 
@@ -128,8 +129,8 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     and its chromaticity that of the full fit (fast, for leave-one-out studies).
     Returns the arrays of a model file.
     """
-    from .fpca import fpca
-    from .priors import fit_hue_concentration, select_gmm
+    from mi_dsbrdf.model.fpca import fpca
+    from mi_dsbrdf.model.priors import fit_hue_concentration, select_gmm
     names = list(fits["names"])
     exclude = list(exclude)
     unknown = [n for n in exclude if n not in names]
@@ -173,7 +174,7 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     file whose stored full fits are reused instead of refitting them. Returns the arrays."""
     t0 = time.perf_counter()
     if fits_from is not None:
-        from .model_data import load_model
+        from mi_dsbrdf.model.model_file import load_model
         a = load_model(fits_from).arrays
         if "fit_controls" not in a:
             raise ModelError("%s holds no full fits to reuse" % fits_from)

@@ -61,11 +61,11 @@ def downsample(env, height, width) -> np.ndarray:
 
 
 def texels(bsdf: dict, res: int, map_hw=(1, 1), shape="sphere"):
-    """A :class:`~mi_dsbrdf.forward.TexelSum` of ``shape`` (:func:`~mi_dsbrdf.scenes.shape_dict`;
+    """A :class:`~mi_dsbrdf.inference.forward.TexelSum` of ``shape`` (:func:`~mi_dsbrdf.app.scenes.shape_dict`;
     anything but the sphere with shadow rays) carrying ``bsdf``, seen by the shipped camera."""
     import mitsuba as mi
-    from .forward import TexelSum
-    from .scenes import camera, shape_dict
+    from mi_dsbrdf.inference.forward import TexelSum
+    from mi_dsbrdf.app.scenes import camera, shape_dict
     scene = mi.load_dict({"type": "scene", "sensor": camera(res), "object": shape_dict(shape, bsdf)})
     return TexelSum(scene, scene.shapes()[0], tuple(map_hw), visibility=shape != "sphere")
 
@@ -88,8 +88,8 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
 def loo_model(name, cache):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
     library from the other 99 fits; cached as ``cache/loo-<name>.npz``)."""
-    from . import model_data
-    from .build_model import build_from_fits, save_model, stored_fits
+    from mi_dsbrdf.model import model_file as model_data
+    from mi_dsbrdf.model.build import build_from_fits, save_model, stored_fits
     path = os.path.join(cache, "loo-%s.npz" % name)
     if not os.path.exists(path):
         fits = stored_fits(model_data.shipped_model().arrays)
@@ -100,7 +100,7 @@ def loo_model(name, cache):
 def specularity(name) -> float:
     """gamma of the most specular lobe of the material's DSBRDF fit at theta_d = 0
     (the x axis of paper Fig. 8)."""
-    from . import model_data
+    from mi_dsbrdf.model import model_file as model_data
     m = model_data.shipped_model().library_material(name)
     return float(np.exp(m.log_gamma[:, 0]).max())
 
@@ -117,7 +117,7 @@ def scale_invariant_log_error(values, truth, mask) -> float:
     """Eq. 20's measure on images or illumination maps: the RMSE of
     log(1 + s v / m) - log(1 + t / m) over ``mask`` (H, W), m the truth's mean
     there, at the best scale s of ``values`` (light and material trade scale)."""
-    from .metrics import log_rmse_scale_invariant
+    from mi_dsbrdf.evaluation.metrics import log_rmse_scale_invariant
     t = np.asarray(truth, np.float64)[mask]
     ref = max(float(t.mean()), 1e-300)
     return log_rmse_scale_invariant(np.asarray(values, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]))[0]
@@ -133,11 +133,11 @@ def _normalised_pair(truth, values, mask) -> np.ndarray:
 
 def bsdf_values(bsdf, samples) -> np.ndarray:
     """(N, 3) BRDF values (1/sr) of any Mitsuba BSDF at the angles of MERL
-    :class:`~mi_dsbrdf.fitting.Samples` (eval / cos theta_o): scores baselines on
+    :class:`~mi_dsbrdf.model.fitting.Samples` (eval / cos theta_o): scores baselines on
     the same grid as the DSBRDF."""
     import drjit as dr
     import mitsuba as mi
-    from .angles import from_half_diff
+    from mi_dsbrdf.brdf.angles import from_half_diff
     wi, wo = from_half_diff(samples.theta_h, samples.theta_d, samples.phi_d)
     n = samples.theta_h.shape[0]
     si = dr.zeros(mi.SurfaceInteraction3f, n)
@@ -149,7 +149,7 @@ def bsdf_values(bsdf, samples) -> np.ndarray:
 
 
 def dsbrdf_bsdf(material):
-    """The ``dsbrdf`` plugin instance of a :class:`~mi_dsbrdf.dsbrdf.Material`."""
+    """The ``dsbrdf`` plugin instance of a :class:`~mi_dsbrdf.brdf.dsbrdf.Material`."""
     import mitsuba as mi
     props = {"type": "dsbrdf", "lobes": int(material.n_lobes)}
     for r in range(material.n_lobes):
@@ -179,12 +179,12 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     where leave-one-out models are kept; ``threads``: Dr.Jit's thread count (0:
     leave it). Returns a JSON-ready dict, plus numpy ``images`` for the report."""
     import drjit as dr
-    from . import inference
-    from .dsbrdf import Material
-    from .fitting import samples_from_table
-    from .measured import MeasuredBRDF
-    from .metrics import log_rmse, log_rmse_scale_invariant
-    from .pipeline import read_image
+    from mi_dsbrdf.inference import envmap as inference
+    from mi_dsbrdf.brdf.dsbrdf import Material
+    from mi_dsbrdf.model.fitting import samples_from_table
+    from mi_dsbrdf.brdf.measured import MeasuredBRDF
+    from mi_dsbrdf.evaluation.metrics import log_rmse, log_rmse_scale_invariant
+    from mi_dsbrdf.app.recover import read_image
     if threads:
         dr.set_thread_count(threads)
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
@@ -226,7 +226,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             seen = state.log_map[..., 0] > inference.BLACK
             recovered_map = np.where(seen[..., None], np.exp(state.log_map), 0.0)
         else:
-            from .adam_inverse import adam_recover
+            from mi_dsbrdf.evaluation.adam import adam_recover
             fit = adam_recover(img, ts.mask, res, (H, W), method, model, spp=case.get("spp", 16),
                                iters=case.get("iters", 100), shape=shape, seed=0)
             out["seconds"] = time.perf_counter() - t0
@@ -251,7 +251,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
 def _relight(case, material, merl, data, res=48, map_hw=(32, 64)):
     """Relit image errors under two probes other than the case's, and the images
     (truth, recovered) for the report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
-    from .pipeline import read_image
+    from mi_dsbrdf.app.recover import read_image
     probes = [p for p in RELIGHT_PROBES if p != case.get("probe")][:2]
     bsdf = dsbrdf_bsdf(material) if hasattr(material, "log_kappa") else material
     errors, images = {}, {}

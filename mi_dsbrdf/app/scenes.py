@@ -1,15 +1,15 @@
 """The example scenes in ``scenes/`` and the assets they use.
 
-``python -m mi_dsbrdf.scenes`` regenerates the committed assets:
+``python -m mi_dsbrdf.app.scenes`` regenerates the committed assets:
 ``scenes/meshes/torus.ply`` (trimesh; a non-convex shape that sees only part of
 the normal sphere from the camera and shadows itself) and
-``scenes/textures/sky.exr`` (:func:`mi_dsbrdf.illumination.procedural_sky`).
+``scenes/textures/sky.exr`` (:func:`mi_dsbrdf.inference.latlong.procedural_sky`).
 """
 from __future__ import annotations
 
 import os
 
-SCENE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+SCENE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "scenes")
 SCENES = {
     "sphere_envmap": "sphere_envmap.xml",
     "sphere_directional": "sphere_directional.xml",
@@ -38,7 +38,7 @@ SHAPES = ("sphere", "torus")
 def shape_dict(shape: str, bsdf) -> dict:
     """Mitsuba dict of ``shape`` (``sphere``, the shipped non-convex ``torus``, or a
     .ply/.obj mesh file) carrying ``bsdf`` (a dict or a BSDF instance)."""
-    from .errors import MiDsbrdfError
+    from mi_dsbrdf.errors import MiDsbrdfError
     if shape == "sphere":
         obj = {"type": "sphere"}
     elif shape == "torus":
@@ -53,7 +53,7 @@ def shape_dict(shape: str, bsdf) -> dict:
 
 def sphere_scene(bsdf: dict, res: int = 24, fov: float = 30.0):
     """A unit sphere with ``bsdf`` seen by :func:`camera`, no light: a small scene
-    for the texel-sum forward model (:mod:`mi_dsbrdf.forward`), which brings its own."""
+    for the texel-sum forward model (:mod:`mi_dsbrdf.inference.forward`), which brings its own."""
     import mitsuba as mi
     return mi.load_dict({"type": "scene", "sensor": camera(res, fov), "object": {"type": "sphere", "bsdf": bsdf}})
 
@@ -79,7 +79,7 @@ def make_torus(path, major=0.7, minor=0.3, sections=96, tube=48) -> None:
 
 
 def build_assets(scene_dir: str = SCENE_DIR) -> list:
-    from .illumination import procedural_sky, write_exr
+    from mi_dsbrdf.inference.latlong import procedural_sky, write_exr
     torus = os.path.join(scene_dir, "meshes", "torus.ply")
     sky = os.path.join(scene_dir, "textures", "sky.exr")
     make_torus(torus)

@@ -5,8 +5,8 @@ import argparse
 import os
 import sys
 
-from .errors import MiDsbrdfError
-from .pipeline import prepare_out
+from mi_dsbrdf.errors import MiDsbrdfError
+from mi_dsbrdf.app.recover import prepare_out
 
 
 def _setup(variant):
@@ -17,8 +17,8 @@ def _setup(variant):
 
 
 def cmd_render(args):
-    from .render import render_to_files
-    from .scenes import scene_path
+    from mi_dsbrdf.app.render import render_to_files
+    from mi_dsbrdf.app.scenes import scene_path
     scene = scene_path(args.scene)
     prepare_out(args.out, args.force)
     stem = os.path.join(args.out, os.path.splitext(os.path.basename(args.scene))[0])
@@ -28,7 +28,7 @@ def cmd_render(args):
 
 
 def cmd_demo(args):
-    from .demo import run
+    from mi_dsbrdf.app.demo import run
     r = run(args.out, material=args.material, res=args.res, map_size=args.map_size, rounds=args.rounds,
             iters=args.iters, spp=args.spp, force=args.force)
     print("demo: %s under a sunsky, recovered in %.0f s: BRDF log-RMSE %.3f (mean material %.3f), "
@@ -38,8 +38,8 @@ def cmd_demo(args):
 
 
 def cmd_build_model(args):
-    from .build_model import build_model
-    from .model_data import SHIPPED
+    from mi_dsbrdf.model.build import build_model
+    from mi_dsbrdf.model.model_file import SHIPPED
     out = args.out or SHIPPED
     if os.path.exists(out) and not args.force:
         raise SystemExit("mi-dsbrdf: %s exists; pass --force to replace it" % out)
@@ -64,7 +64,7 @@ def _map_size(text):
 
 
 def cmd_recover(args):
-    from .pipeline import recover_files
+    from mi_dsbrdf.app.recover import recover_files
     log = recover_files(args.scene, args.image, args.out, mask_file=args.mask, force=args.force,
                         map_size=args.map_size, rounds=args.rounds, iters=args.iters)
     for line in log["needs"]:
@@ -76,7 +76,7 @@ def cmd_recover(args):
 
 
 def cmd_relight(args):
-    from .render import relight
+    from mi_dsbrdf.app.render import relight
     if os.path.exists(args.out) and not args.force:
         raise MiDsbrdfError("%s exists; pass --force to replace it" % args.out)
     r = relight(args.material, args.envmap, args.out, shape=args.shape, res=args.res, spp=args.spp)

@@ -11,7 +11,7 @@ variables, ``ctrl = A p + b``, which covers the three models with one code path:
   2 chromaticity variables per lobe = 42 variables), from the best of a few
   constant-curve starts, with a small curvature penalty that keeps curves
   defined where grazing angles leave few samples;
-* ``fit_basis``: coefficients ψ of a learned :class:`~mi_dsbrdf.curves.CurveBasis`
+* ``fit_basis``: coefficients ψ of a learned :class:`~mi_dsbrdf.brdf.curves.CurveBasis`
   (k, default 10) plus 2 chromaticity variables per lobe (16 for k = 10);
 * ``fit_constant``: one value per curve (the starts of ``fit_full``).
 
@@ -27,11 +27,11 @@ import math
 
 import numpy as np
 
-from .angles import from_half_diff, log_cos_h
-from .curves import DEFAULT_KNOTS, N_CONTROL, spline_matrix
-from .dsbrdf import LOG_GAMMA_MAX, LOG_KAPPA_MAX, Material, clamp_controls
-from .measured import N_PHI_D, N_THETA_D, N_THETA_H, grid_angles
-from .metrics import log_rmse
+from mi_dsbrdf.brdf.angles import from_half_diff, log_cos_h
+from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, spline_matrix
+from mi_dsbrdf.brdf.dsbrdf import LOG_GAMMA_MAX, LOG_KAPPA_MAX, Material, clamp_controls
+from mi_dsbrdf.brdf.measured import N_PHI_D, N_THETA_D, N_THETA_H, grid_angles
+from mi_dsbrdf.evaluation.metrics import log_rmse
 
 N_LOBES = 3
 #: Bounds of fitted log kappa / log gamma control values. gamma >= 0.2 keeps a
@@ -88,7 +88,7 @@ def grid_subset(theta_d_step=3, phi_d_step=20):
 
 
 def samples_from_table(brdf, subset=None) -> Samples:
-    """Samples of a :class:`~mi_dsbrdf.measured.MeasuredBRDF` (unmeasured cells dropped)."""
+    """Samples of a :class:`~mi_dsbrdf.brdf.measured.MeasuredBRDF` (unmeasured cells dropped)."""
     ih, jd, kp = grid_subset() if subset is None else subset
     keep = brdf.measured[ih, jd, kp]
     ih, jd, kp = ih[keep], jd[keep], kp[keep]
@@ -129,7 +129,7 @@ class _Problem:
 
     def lobes(self, ctrl):
         """(N, R) lobe values L_r and their derivatives by the log kappa and
-        log gamma control values (clamped as in :func:`~mi_dsbrdf.dsbrdf.clamp_controls`;
+        log gamma control values (clamped as in :func:`~mi_dsbrdf.brdf.dsbrdf.clamp_controls`;
         zero derivative where a clamp is active): (L, dL_da (N, R, 6), dL_dg (N, R, 6))."""
         lk, lg = clamp_controls(ctrl[:, 0], ctrl[:, 1])
         free_k = (ctrl[:, 0] == lk).astype(np.float64)          # (R, 6)

@@ -40,7 +40,7 @@ def latlong_of(emitter_dict, height=16, width=32, samples=1 << 20, seed=0) -> np
     grid of directions would miss)."""
     import drjit as dr
     import mitsuba as mi
-    from .illumination import direction_to_uv, texel_solid_angles
+    from mi_dsbrdf.inference.latlong import direction_to_uv, texel_solid_angles
     scene = mi.load_dict({"type": "scene", "e": emitter_dict})
     em = scene.emitters()[0]
     rng = np.random.default_rng(seed)
@@ -58,7 +58,7 @@ def latlong_of(emitter_dict, height=16, width=32, samples=1 << 20, seed=0) -> np
 
 
 def scene_xml(res, envmap) -> str:
-    """The recovery scene: :func:`~mi_dsbrdf.scenes.camera` (fov 32), a sphere with
+    """The recovery scene: :func:`~mi_dsbrdf.app.scenes.camera` (fov 32), a sphere with
     a bare ``dsbrdf`` and an envmap whose file only stands in for the unknown light."""
     return """<scene version="3.0.0">
     <integrator type="direct"/>
@@ -77,21 +77,21 @@ def scene_xml(res, envmap) -> str:
 def brdf_error(material, truth) -> float:
     """Eq. 20 of ``material`` against ``truth`` (a library material) on the MERL
     grid cells the fits use."""
-    from .fitting import samples_from_function
-    from .metrics import material_error
+    from mi_dsbrdf.model.fitting import samples_from_function
+    from mi_dsbrdf.evaluation.metrics import material_error
     return material_error(material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
 
 
 def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3, iters=15, spp=256,
         force=False) -> dict:
     import mitsuba as mi
-    from . import load_material
-    from .illumination import write_exr
-    from .evaluation import scale_invariant_log_error
-    from .model_data import shipped_model
-    from .pipeline import prepare_out, read_image, recover_files
-    from .render import save_preview
-    from .scenes import camera
+    from mi_dsbrdf import load_material
+    from mi_dsbrdf.inference.latlong import write_exr
+    from mi_dsbrdf.evaluation.experiment import scale_invariant_log_error
+    from mi_dsbrdf.model.model_file import shipped_model
+    from mi_dsbrdf.app.recover import prepare_out, read_image, recover_files
+    from mi_dsbrdf.app.render import save_preview
+    from mi_dsbrdf.app.scenes import camera
     prepare_out(out, force)
     t0 = time.perf_counter()
     # 1. the observed image
