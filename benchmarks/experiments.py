@@ -44,7 +44,7 @@ SUN_PROBE = "polyhaven/blouberg_sunrise_2_1k.hdr"
 RES, MAP = 64, [32, 64]
 
 
-def _case(group, kind, material, priors=True, **kw) -> dict:
+def make_case(group, kind, material, priors=True, **kw) -> dict:
     c = {"group": group, "kind": kind, "material": material, "priors": priors, "res": RES, "map": MAP,
          "rounds": 3, "iters": 15, "shape": "sphere", "method": "dsbrdf"}
     c.update(kw)
@@ -70,26 +70,26 @@ def cases(full=False, materials=None) -> list:
     for m in mats:
         for a in angles:
             for p in (True, False):
-                out.append(_case("point", "point", m, p, angle=a))
+                out.append(make_case("point", "point", m, p, angle=a))
         for probe in probes:
             for p in (True, False):
-                out.append(_case("probe", "probe", m, p, probe=probe))
+                out.append(make_case("probe", "probe", m, p, probe=probe))
     grace = PROBES[0]
-    out += [_case("stiff", "point", "chrome", angle=60), _case("stiff", "probe", "chrome", probe=grace),
-            _case("stiff", "point", "pink-felt", angle=60), _case("stiff", "probe", "pink-felt", probe=grace),
-            _case("stiff", "point", "gold-metallic-paint", angle=120),
-            _case("stiff", "probe", "gold-metallic-paint", probe=SUN_PROBE),
-            _case("stiff", "probe", "blue-acrylic", probe=grace, shape="torus")]
+    out += [make_case("stiff", "point", "chrome", angle=60), make_case("stiff", "probe", "chrome", probe=grace),
+            make_case("stiff", "point", "pink-felt", angle=60), make_case("stiff", "probe", "pink-felt", probe=grace),
+            make_case("stiff", "point", "gold-metallic-paint", angle=120),
+            make_case("stiff", "probe", "gold-metallic-paint", probe=SUN_PROBE),
+            make_case("stiff", "probe", "blue-acrylic", probe=grace, shape="torus")]
     b = dict(probe=grace)
     m = "gold-metallic-paint"
-    out += [_case("budget", "probe", m, map=[8, 16], rounds=1, iters=5, **b),
-            _case("budget", "probe", m, map=[16, 32], rounds=2, iters=10, **b),
-            _case("budget", "probe", m, map=[32, 64], rounds=3, iters=15, **b),
-            _case("budget", "probe", m, map=[32, 64], rounds=6, iters=30, **b)]
+    out += [make_case("budget", "probe", m, map=[8, 16], rounds=1, iters=5, **b),
+            make_case("budget", "probe", m, map=[16, 32], rounds=2, iters=10, **b),
+            make_case("budget", "probe", m, map=[32, 64], rounds=3, iters=15, **b),
+            make_case("budget", "probe", m, map=[32, 64], rounds=6, iters=30, **b)]
     for spp, iters in ((4, 100), (16, 100), (16, 300)):
-        out.append(_case("budget", "probe", m, False, method="principled-adam", spp=spp, iters=iters, **b))
+        out.append(make_case("budget", "probe", m, False, method="principled-adam", spp=spp, iters=iters, **b))
     for spp, iters in ((4, 100), (16, 200)):
-        out.append(_case("budget", "probe", m, False, method="dsbrdf-adam", spp=spp, iters=iters, **b))
+        out.append(make_case("budget", "probe", m, False, method="dsbrdf-adam", spp=spp, iters=iters, **b))
     ids = [c["id"] for c in out]
     assert len(ids) == len(set(ids)), "case ids must be unique"
     return out

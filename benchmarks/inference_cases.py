@@ -12,6 +12,7 @@ models, point lights and probes, with and without priors) is measured by
 
 Writes benchmarks/results/inference.json (the README quotes it).
 """
+import dataclasses
 import json
 import os
 import time
@@ -19,9 +20,11 @@ import time
 import numpy as np
 
 import mi_dsbrdf  # noqa: F401
-from mi_dsbrdf.inference import envmap as inference
+from mi_dsbrdf.config import PRESETS
+from mi_dsbrdf.inference import recover_envmap, recover_light
 from mi_dsbrdf.model import model_file as model_data
-from mi_dsbrdf.evaluation.experiment import POINT_DISTANCE, direction_error_deg, light_at, render, texels
+from mi_dsbrdf.evaluation.experiment import POINT_DISTANCE, light_at, render, texels
+from mi_dsbrdf.evaluation.metrics import direction_error_deg
 from mi_dsbrdf.inference.latlong import procedural_sky
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -33,20 +36,21 @@ def runtime_cases():
     out = {}
     sky = procedural_sky(64, 128).astype(np.float64)
     img = render(texels(MATERIAL, 128, (64, 128)), sky.reshape(-1, 3))
-    cfg = inference.Config(map_size=(32, 64), max_rounds=3, block_iters=15)
+    cfg = PRESETS["benchmarked"]
     ts = texels({"type": "dsbrdf"}, 128, (32, 64))
     t0 = time.perf_counter()
-    state, rows = inference.recover(ts, img, ts.mask, model, cfg)
+    rows = recover_envmap(ts, img, ts.mask, model, cfg).log
     out["envmap_128px_32x64_two_pass"] = {"seconds": time.perf_counter() - t0, "rounds": len(rows),
                                           "target_seconds": 120}
     pos = POINT_DISTANCE * light_at(40)
     img = render(texels(MATERIAL, 128), point=pos)
     ts = texels({"type": "dsbrdf"}, 128)
     t0 = time.perf_counter()
-    res, rows = inference.recover_light(ts, img, ts.mask, model, inference.Config(max_rounds=3, block_iters=20),
-                                        point=(np.zeros(3), POINT_DISTANCE))
+    res = recover_light(ts, img, ts.mask, model, dataclasses.replace(cfg, block_iters=20),
+                        point=(np.zeros(3), POINT_DISTANCE))
+    rows = res.log
     out["point_light_128px"] = {"seconds": time.perf_counter() - t0, "rounds": len(rows), "target_seconds": 30,
-                                "direction_error_deg": direction_error_deg(res["direction"], pos)}
+                                "direction_error_deg": direction_error_deg(res.light["direction"], pos)}
     for k, v in out.items():
         print("%-32s %6.1f s (target %d s)" % (k, v["seconds"], v["target_seconds"]), flush=True)
     return out

@@ -53,10 +53,10 @@ def score(job):
     a = load_model(model_file).arrays
     names = [str(n) for n in a["fit_names"]]
     i = names.index(name)
-    sub = fitting.grid_subset(theta_d_step=1, phi_d_step=6)
+    sub = samples.grid_subset(theta_d_step=1, phi_d_step=6)
     ev = build_model.load_samples(source, name, sub)
     fit = build_model.load_samples(source, name)
-    coarse = build_model.load_samples(source, name, fitting.grid_subset(theta_d_step=6, phi_d_step=30))
+    coarse = build_model.load_samples(source, name, samples.grid_subset(theta_d_step=6, phi_d_step=30))
 
     def err(values):
         return log_rmse(values, ev.values, ev.cos_i)

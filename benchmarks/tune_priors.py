@@ -1,6 +1,6 @@
 """Choose the prior weights (lambda of Eq. 18) on held-out materials and a held-out probe.
 
-The weights of :class:`mi_dsbrdf.inference.envmap.Config` balance the priors against
+The weights of :class:`mi_dsbrdf.config.Config` balance the priors against
 the likelihood (Eq. 19), which sums over thousands of pixels: at weight 1 the
 priors hardly move the estimate. This sweep runs probe cases (synthetic MERL
 renders, leave-one-out models, as in ``benchmarks/experiments.py``) on
@@ -26,9 +26,9 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from experiments import DATA, QUICK_MATERIALS, ROOT, _case, run_on_cluster  # noqa: E402
-from experiments_report import load  # noqa: E402
+# a sibling script (run as `python benchmarks/tune_priors.py`, its folder is on sys.path)
+from experiments import DATA, QUICK_MATERIALS, ROOT, make_case, run_on_cluster
+from experiments_report import load
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "tune_priors")
 RESULT = os.path.join(ROOT, "benchmarks", "results", "prior_weights.json")
@@ -44,10 +44,10 @@ def tuning_cases(materials=VALIDATION_MATERIALS, grid=GRID) -> list:
     assert not set(materials) & set(QUICK_MATERIALS), "validation materials must not be test materials"
     out = []
     for m in materials:
-        base = _case("tune", "probe", m, False, probe=VALIDATION_PROBE)
+        base = make_case("tune", "probe", m, False, probe=VALIDATION_PROBE)
         out.append(base)
         for wi, wg, wh in grid:
-            c = _case("tune", "probe", m, True, probe=VALIDATION_PROBE,
+            c = make_case("tune", "probe", m, True, probe=VALIDATION_PROBE,
                       weights=dict(w_entropy=wi, w_gradient=wi, w_gmm=wg, w_hue=wh))
             c["id"] = c["id"].replace("-priors", "-illum%g-gmm%g-hue%g" % (wi, wg, wh))
             out.append(c)

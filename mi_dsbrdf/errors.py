@@ -1,5 +1,10 @@
-"""Exception types: every bad input the package detects raises one of these,
-with a message that names the problem and, where there is one, the fix."""
+"""Every exception type of the package.
+
+Each bad input the package detects raises one of these, with a message that
+names the problem and, where there is one, the fix. The command line prints
+them (and file-system errors, ``OSError``) as one line; anything else is a bug
+and keeps its traceback.
+"""
 
 
 class MiDsbrdfError(Exception):
@@ -24,3 +29,19 @@ class MeasuredFileError(MiDsbrdfError, ValueError):
 
 class ModelError(MiDsbrdfError, ValueError):
     """A reflectance-model file (bases, priors, library) is missing or malformed."""
+
+
+class ConfigError(MiDsbrdfError, ValueError):
+    """An inference setting (:class:`~mi_dsbrdf.config.Config`) is out of range."""
+
+
+class InputError(MiDsbrdfError, ValueError):
+    """Bad user input (image, mask, output folder, scene file): the message says what and where."""
+
+
+class SceneError(MiDsbrdfError, ValueError):
+    """A scene that inference cannot handle (no dsbrdf object, several lights, ...)."""
+
+
+__all__ = ["MiDsbrdfError", "BackendError", "VariantError", "MaterialError", "MeasuredFileError", "ModelError",
+           "ConfigError", "InputError", "SceneError"]

@@ -1,7 +1,7 @@
 """Lambert + Cook-Torrance, the comparison model of the reports."""
 import numpy as np
 
-from mi_dsbrdf.model import fitting
+from mi_dsbrdf.model import samples
 from mi_dsbrdf.model.baselines import cook_torrance, fit_cook_torrance
 
 
@@ -9,8 +9,8 @@ def test_cook_torrance_fit_recovers_a_known_one_lobe_model():
     truth = np.array([np.log(0.3), np.log(0.2), np.log(0.1),        # k_d
                       np.log(0.05), np.log(0.05), np.log(0.05),     # k_s
                       np.log(0.15), -1.0, -1.0, -1.0])              # m, logit F0
-    s = fitting.samples_from_function(lambda th, td, pd: cook_torrance(truth, th, td, pd, 1),
-                                      fitting.grid_subset(theta_d_step=6, phi_d_step=30))
+    s = samples.samples_from_function(lambda th, td, pd: cook_torrance(truth, th, td, pd, 1),
+                                      samples.grid_subset(theta_d_step=6, phi_d_step=30))
     params, err = fit_cook_torrance(s, 1)
     assert err < 1e-4
     ref = cook_torrance(truth, s.theta_h, s.theta_d, s.phi_d, 1)

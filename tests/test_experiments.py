@@ -9,8 +9,9 @@ import pytest
 
 from conftest import data_path
 from mi_dsbrdf.evaluation import experiment as ev
+from mi_dsbrdf.evaluation import metrics
 from mi_dsbrdf.model import model_file as model_data
-from mi_dsbrdf.model.fitting import samples_from_function
+from mi_dsbrdf.model.samples import samples_from_function
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
 
@@ -31,19 +32,19 @@ def test_metrics_are_scale_invariant_and_detect_errors():
     rng = np.random.default_rng(0)
     t = rng.random((8, 16, 3)) + 0.1
     seen = np.ones((8, 16), bool)
-    assert ev.scale_invariant_log_error(7.0 * t, t, seen) < 1e-6
-    assert ev.scale_invariant_log_error(t + 3 * rng.random(t.shape), t, seen) > 0.1
-    assert ev.scale_invariant_log_error(t ** 3, t, seen) > 0.05
+    assert metrics.scale_invariant_log_error(7.0 * t, t, seen) < 1e-6
+    assert metrics.scale_invariant_log_error(t + 3 * rng.random(t.shape), t, seen) > 0.1
+    assert metrics.scale_invariant_log_error(t ** 3, t, seen) > 0.05
     half = seen.copy()
     half[:4] = False             # only the masked texels count
-    assert ev.scale_invariant_log_error(np.where(half[..., None], t, 1e3), t, half) < 1e-6
-    assert abs(ev.direction_error_deg([1, 0, 0], [1, 1, 0]) - 45.0) < 1e-9
+    assert metrics.scale_invariant_log_error(np.where(half[..., None], t, 1e3), t, half) < 1e-6
+    assert abs(metrics.direction_error_deg([1, 0, 0], [1, 1, 0]) - 45.0) < 1e-9
 
 
 def test_bsdf_values_of_the_plugin_match_the_material():
     m = model_data.shipped_model().library_material("gold-metallic-paint")
     s = samples_from_function(lambda th, td, pd: m.eval(th, td))
-    v = ev.bsdf_values(ev.dsbrdf_bsdf(m), s)
+    v = metrics.bsdf_values(ev.dsbrdf_bsdf(m), s)
     assert np.max(np.abs(v / s.values - 1)) < 1e-3
 
 
@@ -127,11 +128,11 @@ def test_prior_tuning_keeps_test_materials_out_and_picks_the_lowest_geometric_me
 
 
 def test_config_defaults_are_the_tuned_prior_weights():
-    """inference.Config's prior weights are the ones the committed sweep chose."""
-    from mi_dsbrdf.inference import envmap as inference
+    """Config's prior weights are the ones the committed sweep chose."""
+    from mi_dsbrdf.config import Config
     import tune_priors
     with open(tune_priors.RESULT) as f:
         tuned = json.load(f)
-    cfg = inference.Config()
+    cfg = Config()
     assert {k: getattr(cfg, k) for k in tuned["best_weights"]} == tuned["best_weights"]
     assert tuned["geometric_mean_eq20"][tuned["best"]] < tuned["geometric_mean_eq20"]["none"]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf import Material
-from mi_dsbrdf.model import fitting
+from mi_dsbrdf.model import fitting, samples
 from mi_dsbrdf.brdf.measured import MeasuredBRDF, eval_nbrdf, load_nbrdf_weights
 from mi_dsbrdf.evaluation.metrics import log_rmse
 
@@ -29,15 +29,15 @@ def test_log_rmse_is_eq5():
 
 
 def test_grid_subset_keeps_directions_above_horizon():
-    ih, jd, kp = fitting.grid_subset(**SUBSET)
-    s = fitting.samples_from_function(lambda th, td, pd: np.ones((th.size, 3)), (ih, jd, kp))
+    ih, jd, kp = samples.grid_subset(**SUBSET)
+    s = samples.samples_from_function(lambda th, td, pd: np.ones((th.size, 3)), (ih, jd, kp))
     assert np.all(s.cos_i > 0) and len(s) == ih.size
     assert s.theta_h.min() == 0.0 and s.theta_d.max() > math.radians(80)
 
 
 def test_jacobian_matches_finite_differences():
-    s = fitting.samples_from_function(lambda th, td, pd: known_material().eval(th, td),
-                                      fitting.grid_subset(theta_d_step=15, phi_d_step=60))
+    s = samples.samples_from_function(lambda th, td, pd: known_material().eval(th, td),
+                                      samples.grid_subset(theta_d_step=15, phi_d_step=60))
     prob = fitting._Problem(s, 3)
     rng = np.random.default_rng(0)
     ctrl = np.stack([np.log([[0.3], [2.0], [5.0]]) + rng.normal(0, .1, (3, 6)),
@@ -60,7 +60,7 @@ def test_jacobian_matches_finite_differences():
 def test_fit_recovers_known_dsbrdf_on_merl_grid():
     truth = known_material()
     table = MeasuredBRDF.from_function(lambda th, td, pd: truth.eval(th, td), name="known")
-    s = fitting.samples_from_table(table, fitting.grid_subset(**SUBSET))
+    s = samples.samples_from_table(table, samples.grid_subset(**SUBSET))
     fit = fitting.fit_full(s)
     assert fit.error < 2e-3, fit.error
     # the lobes come back in specularity order and with the true parameters
@@ -70,7 +70,7 @@ def test_fit_recovers_known_dsbrdf_on_merl_grid():
     np.testing.assert_allclose(np.log(g_fit[:, 1:]), np.log(g_true[:, 1:]), atol=0.1)
     np.testing.assert_allclose(fit.material.chromaticity[:2], truth.chromaticity[:2], atol=0.01)
     # and the BRDF everywhere on held-out grid cells
-    held = fitting.samples_from_table(table, fitting.grid_subset(theta_d_step=7, phi_d_step=17))
+    held = samples.samples_from_table(table, samples.grid_subset(theta_d_step=7, phi_d_step=17))
     assert log_rmse(fit.material.eval(held.theta_h, held.theta_d), held.values, held.cos_i) < 3e-3
 
 
@@ -82,7 +82,7 @@ def test_basis_fit_recovers_psi_and_chromaticity():
     psi = np.array([0.8, -0.5, 0.3, 0.2])
     chroma = np.array([[0.6, 0.3, 0.1], [0.2, 0.3, 0.5], [0.3, 0.3, 0.4]])
     truth = Material.from_basis(basis, psi, chroma)
-    s = fitting.samples_from_function(lambda th, td, pd: truth.eval(th, td), fitting.grid_subset(**SUBSET))
+    s = samples.samples_from_function(lambda th, td, pd: truth.eval(th, td), samples.grid_subset(**SUBSET))
     fit = fitting.fit_basis(s, basis)
     assert fit.error < 1e-4
     np.testing.assert_allclose(fit.variables, psi, atol=0.02)
@@ -93,8 +93,8 @@ def test_fits_of_stiff_merl_materials_converge(nbrdf_file):
     """A near-mirror metal and a near-Lambertian fabric: finite, ordered, accurate."""
     for name, bound in (("chrome", 0.12), ("white-fabric", 0.02)):
         w = load_nbrdf_weights(nbrdf_file, name)
-        s = fitting.samples_from_function(lambda th, td, pd: eval_nbrdf(w, th, td, pd),
-                                          fitting.grid_subset(**SUBSET), name)
+        s = samples.samples_from_function(lambda th, td, pd: eval_nbrdf(w, th, td, pd),
+                                          samples.grid_subset(**SUBSET), name)
         fit = fitting.fit_full(s)
         m = fit.material
         assert np.isfinite(fit.error) and fit.error < bound, (name, fit.error)

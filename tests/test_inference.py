@@ -4,7 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from mi_dsbrdf.inference import envmap as inference
+from mi_dsbrdf.config import Config
+from mi_dsbrdf.inference import recover_envmap, recover_light
+from mi_dsbrdf.inference.objective import direction_from_angles
+from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.inference.forward import TexelSum
@@ -12,7 +15,7 @@ from mi_dsbrdf.app.scenes import sphere_scene
 
 TRUTH = "gold-metallic-paint"
 RES = 24
-LIGHT = inference.direction_from_angles(1.1, 2.6)      # 40 deg from the viewer
+LIGHT = direction_from_angles(1.1, 2.6)      # 40 deg from the viewer
 
 
 def sphere(bsdf):
@@ -22,8 +25,7 @@ def sphere(bsdf):
 @pytest.fixture(scope="module")
 def observed():
     s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (1, 1))
-    ts.set_directions(LIGHT[None], [1.0])
+    ts = TexelSum(s, s.shapes()[0], (1, 1)).with_directions(LIGHT[None], [1.0])
     img = np.zeros((RES * RES, 3))
     img[ts.pixels] = ts.render(np.full((1, 3), 3.0))
     return img.reshape(RES, RES, 3)
@@ -43,7 +45,7 @@ def brdf_error(res, model, ts, scale_invariant=False):
     """|log BRDF error| at the lit pixels' angles; scale-invariant (Eq. 20 style)
     when the light's intensity is unknown (only light x BRDF is observable)."""
     th, td = pixel_angles(ts, LIGHT)
-    m = Material.from_basis(model.basis, res["psi"], res["chromaticity"])
+    m = res.material
     d = np.log(m.eval(th, td)) - np.log(model.library_material(TRUTH).eval(th, td))
     return np.abs(d - np.median(d) if scale_invariant else d)
 
@@ -52,10 +54,10 @@ def test_known_directional_light_recovers_the_dsbrdf(observed):
     s = sphere({"type": "dsbrdf"})
     ts = TexelSum(s, s.shapes()[0], (1, 1))
     model = model_data.shipped_model()
-    cfg = inference.Config(max_rounds=1, block_iters=40)
-    res, rows = inference.recover_light(ts, observed, ts.mask, model, cfg, known_light=(LIGHT, 3.0))
-    assert all(np.isfinite(r["neg_log_posterior"]) for r in rows)
-    mean_log = rows[-1]["likelihood"] * cfg.likelihood_scale / (3 * ts.mask.sum())
+    cfg = Config(max_rounds=1, block_iters=40)
+    res = recover_light(ts, observed, ts.mask, model, cfg, known_light=(LIGHT, 3.0))
+    assert all(np.isfinite(r["neg_log_posterior"]) for r in res.log)
+    mean_log = res.log[-1]["likelihood"] * cfg.likelihood_scale / (3 * ts.mask.sum())
     assert mean_log < 0.005                                    # re-render: mean |log error| < 0.5 %
     err = brdf_error(res, model, ts)
     assert np.median(err) < 0.05, np.median(err)              # BRDF at the observed angles within 5 %
@@ -65,29 +67,28 @@ def test_unknown_directional_light_within_a_degree(observed):
     s = sphere({"type": "dsbrdf"})
     ts = TexelSum(s, s.shapes()[0], (1, 1))
     model = model_data.shipped_model()
-    res, rows = inference.recover_light(ts, observed, ts.mask, model,
-                                              inference.Config(max_rounds=4, block_iters=40))
-    err = math.degrees(math.acos(min(1.0, float(res["direction"] @ LIGHT))))
+    res = recover_light(ts, observed, ts.mask, model,
+                                              Config(max_rounds=4, block_iters=40))
+    err = math.degrees(math.acos(min(1.0, float(res.light["direction"] @ LIGHT))))
     assert err < 1.0, err
-    assert res["intensity"] > 0 and np.isfinite(res["intensity"])
+    assert res.light["intensity"] > 0 and np.isfinite(res.light["intensity"])
     assert np.median(brdf_error(res, model, ts, scale_invariant=True)) < 0.05
 
 
 def test_unknown_point_light_at_a_finite_distance_within_a_degree():
     pos = 5.0 * LIGHT
     s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (1, 1))
-    ts.set_point(pos)
+    ts = TexelSum(s, s.shapes()[0], (1, 1)).with_point(pos)
     img = np.zeros((RES * RES, 3))
     img[ts.pixels] = ts.render(np.full((1, 3), 40.0))
     s2 = sphere({"type": "dsbrdf"})
     ts2 = TexelSum(s2, s2.shapes()[0], (1, 1))
-    res, rows = inference.recover_light(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(),
-                                        inference.Config(max_rounds=3, block_iters=30), point=(np.zeros(3), 5.0))
-    err = math.degrees(math.acos(min(1.0, float(res["direction"] @ LIGHT))))
+    res = recover_light(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(),
+                                        Config(max_rounds=3, block_iters=30), point=(np.zeros(3), 5.0))
+    err = math.degrees(math.acos(min(1.0, float(res.light["direction"] @ LIGHT))))
     assert err < 1.0, err
-    np.testing.assert_allclose(res["position"], 5.0 * res["direction"], rtol=1e-9)
-    assert all(np.isfinite(r["neg_log_posterior"]) for r in rows)
+    np.testing.assert_allclose(res.light["position"], 5.0 * res.light["direction"], rtol=1e-9)
+    assert all(np.isfinite(r["neg_log_posterior"]) for r in res.log)
 
 
 def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
@@ -99,14 +100,14 @@ def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
     img[ts.pixels] = ts.render(sky)
     s2 = sphere({"type": "dsbrdf"})
     ts2 = TexelSum(s2, s2.shapes()[0], (8, 16))
-    cfg = inference.Config(map_size=(8, 16), max_rounds=2, block_iters=5, illumination_iters=20)
-    state, rows = inference.recover(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(), cfg)
-    passes = [r["pass"] for r in rows]
-    assert passes.count("start") == len(inference.reflectance_starts(model_data.shipped_model()))
+    cfg = Config(map_size=(8, 16), max_rounds=2, block_iters=5, illumination_iters=20)
+    res = recover_envmap(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(), cfg)
+    passes = [r["pass"] for r in res.log]
+    assert passes.count("start") == len(reflectance_starts(model_data.shipped_model()))
     assert "grey" in passes and "colour" in passes
-    grey = [r["neg_log_posterior"] for r in rows if r["pass"] == "grey"]
-    colour = [r["neg_log_posterior"] for r in rows if r["pass"] == "colour"]
+    grey = [r["neg_log_posterior"] for r in res.log if r["pass"] == "grey"]
+    colour = [r["neg_log_posterior"] for r in res.log if r["pass"] == "colour"]
     assert all(np.isfinite(grey + colour)) and colour[-1] < grey[0]
     # texels straight behind the sphere are seen by no pixel: black, and counted
-    unseen = state.log_map[..., 0] == inference.BLACK
-    assert unseen.sum() == rows[-1]["unseen_texels"] > 0
+    assert (~res.seen).sum() == res.log[-1]["unseen_texels"] > 0
+    assert np.all(res.illumination[~res.seen] == 0) and np.all(res.illumination[res.seen] > 0)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf.inference.likelihood import log_likelihood_terms
-from mi_dsbrdf.model.priors import EntropyPrior, GradientPrior
+from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior
 
 
 def finite_differences(f, x, h=1e-6):
@@ -84,7 +84,8 @@ def test_entropy_prior_prefers_peaky_illumination_and_ignores_scale():
 def test_posterior_illumination_terms_gradient_matches_finite_differences():
     """The sum the illumination block minimises (likelihood + entropy + gradient
     priors through the transport), against central differences in log L."""
-    from mi_dsbrdf.inference import envmap as inference
+    from mi_dsbrdf.config import Config
+    from mi_dsbrdf.inference.objective import Posterior
     from mi_dsbrdf.model import model_file as model_data
     from mi_dsbrdf.inference.forward import TexelSum, unseen_texels
     from mi_dsbrdf.inference.latlong import procedural_sky
@@ -93,9 +94,9 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences():
     ts = TexelSum(s, s.shapes()[0], (4, 8))
     observed = np.zeros((144, 3))
     observed[ts.pixels] = ts.render(procedural_sky(4, 8))
-    post = inference.Posterior(ts, observed.reshape(12, 12, 3), ts.mask, model_data.shipped_model(),
-                               inference.Config(map_size=(4, 8)))
-    T = ts.transport()
+    post = Posterior(ts, observed.reshape(12, 12, 3), ts.mask, model_data.shipped_model(),
+                               Config(map_size=(4, 8)))
+    T = post.ts.transport()
     seen = ~unseen_texels(T).reshape(4, 8)
     x = np.log(procedural_sky(4, 8).astype(np.float64)) + np.random.default_rng(1).normal(0, 0.3, (4, 8, 3))
     bins = post.entropy.bins_for(x)
@@ -114,7 +115,8 @@ def test_prior_weights_follow_the_observed_pixel_count():
     """The likelihood sums over pixels, so the priors are weighted by observed pixels /
     PRIOR_PIXELS: half the pixels masked out halves every prior term, and the Config
     weights apply as given at PRIOR_PIXELS."""
-    from mi_dsbrdf.inference import envmap as inference
+    from mi_dsbrdf.config import PRIOR_PIXELS, Config
+    from mi_dsbrdf.inference.objective import Posterior
     from mi_dsbrdf.model import model_file as model_data
     from mi_dsbrdf.inference.forward import TexelSum
     from mi_dsbrdf.app.scenes import sphere_scene
@@ -122,15 +124,15 @@ def test_prior_weights_follow_the_observed_pixel_count():
     ts = TexelSum(s, s.shapes()[0], (4, 8))
     observed = np.ones((12, 12, 3))
     model = model_data.shipped_model()
-    cfg = inference.Config(map_size=(4, 8), w_gmm=2.0, w_entropy=3.0)
+    cfg = Config(map_size=(4, 8), w_gmm=2.0, w_entropy=3.0)
     half = ts.mask.copy()
     half[:6] = False
-    full_post = inference.Posterior(ts, observed, ts.mask, model, cfg)
-    half_post = inference.Posterior(ts, observed, half, model, cfg)
+    full_post = Posterior(ts, observed, ts.mask, model, cfg)
+    half_post = Posterior(ts, observed, half, model, cfg)
     n_full, n_half = int(ts.mask.sum()), int(half.sum())
     assert 0 < n_half < n_full
-    assert full_post.w["gmm"] == pytest.approx(2.0 * n_full / inference.PRIOR_PIXELS)
-    assert full_post.w["entropy"] == pytest.approx(3.0 * n_full / inference.PRIOR_PIXELS)
+    assert full_post.w["gmm"] == pytest.approx(2.0 * n_full / PRIOR_PIXELS)
+    assert full_post.w["entropy"] == pytest.approx(3.0 * n_full / PRIOR_PIXELS)
     psi = np.linspace(-1, 1, model.basis.n_bases)
     logits = np.zeros((model.basis.n_lobes, 2))
     x = np.random.default_rng(0).normal(0, 1, (4, 8, 3))

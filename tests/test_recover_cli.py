@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf.app.cli import main
-from mi_dsbrdf.inference.latlong import write_exr
+from mi_dsbrdf.app.io import write_exr
 from mi_dsbrdf.app.scenes import scene_path
 
 RES = 32

@@ -2,23 +2,39 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import os
 import sys
 
-from mi_dsbrdf.errors import MiDsbrdfError
-from mi_dsbrdf.app.recover import prepare_out
+import mitsuba as mi
+
+from mi_dsbrdf.app.demo import run
+from mi_dsbrdf.app.io import prepare_out
+from mi_dsbrdf.app.recover import recover_files
+from mi_dsbrdf.app.render import relight, render_to_files
+from mi_dsbrdf.app.scenes import scene_path
+from mi_dsbrdf.config import PRESETS
+from mi_dsbrdf.errors import InputError, MiDsbrdfError
+from mi_dsbrdf.model.build import build_model
+from mi_dsbrdf.model.model_file import SHIPPED
 
 
 def _setup(variant):
-    import mitsuba as mi
+    """Switch to ``variant`` (the package's import selected llvm_ad_rgb and
+    registered the plugins; they re-register on a switch)."""
     if variant:
         mi.set_variant(variant)
-    import mi_dsbrdf  # noqa: F401  (libLLVM check, variant, plugins)
+
+
+def _config(args):
+    """The named preset with the command line's overrides (validated)."""
+    overrides = {k: v for k, v in (("map_size", args.map_size), ("max_rounds", args.rounds),
+                                   ("block_iters", args.iters)) if v is not None}
+    return dataclasses.replace(PRESETS[args.preset], **overrides)
 
 
 def cmd_render(args):
-    from mi_dsbrdf.app.render import render_to_files
-    from mi_dsbrdf.app.scenes import scene_path
     scene = scene_path(args.scene)
     prepare_out(args.out, args.force)
     stem = os.path.join(args.out, os.path.splitext(os.path.basename(args.scene))[0])
@@ -28,9 +44,7 @@ def cmd_render(args):
 
 
 def cmd_demo(args):
-    from mi_dsbrdf.app.demo import run
-    r = run(args.out, material=args.material, res=args.res, map_size=args.map_size, rounds=args.rounds,
-            iters=args.iters, spp=args.spp, force=args.force)
+    r = run(args.out, material=args.material, res=args.res, config=_config(args), spp=args.spp, force=args.force)
     print("demo: %s under a sunsky, recovered in %.0f s: BRDF log-RMSE %.3f (mean material %.3f), "
           "relit %.3f -> %s" % (r["material"], r["recover_seconds"], r["brdf_log_rmse_scale_invariant"],
                                  r["mean_material_log_rmse_scale_invariant"], r["relit_log_rmse_after_scale"],
@@ -38,14 +52,11 @@ def cmd_demo(args):
 
 
 def cmd_build_model(args):
-    from mi_dsbrdf.model.build import build_model
-    from mi_dsbrdf.model.model_file import SHIPPED
     out = args.out or SHIPPED
     if os.path.exists(out) and not args.force:
-        raise SystemExit("mi-dsbrdf: %s exists; pass --force to replace it" % out)
+        raise InputError("%s exists; pass --force to replace it" % out)
     a = build_model(args.merl, out, k=args.k, exclude=args.exclude, workers=args.workers,
                     fits_from=args.fits_from)
-    import json
     info = json.loads(str(a["build_info"]))
     print("model with %d bases (%.1f%% of the curve variance), %d library materials, GMM of %d %s components, "
           "hue kappa_h %.3g: %s (%.0f s)" % (
@@ -58,15 +69,12 @@ def _map_size(text):
         h, w = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise argparse.ArgumentTypeError("map size must be HxW, e.g. 16x32; got %r" % text) from None
-    if h < 2 or w < 4:
-        raise argparse.ArgumentTypeError("map size %dx%d is too small (at least 2x4)" % (h, w))
-    return h, w
+    return h, w     # its range is checked by Config
 
 
 def cmd_recover(args):
-    from mi_dsbrdf.app.recover import recover_files
     log = recover_files(args.scene, args.image, args.out, mask_file=args.mask, force=args.force,
-                        map_size=args.map_size, rounds=args.rounds, iters=args.iters)
+                        config=_config(args))
     for line in log["needs"]:
         print("  " + line)
     if log.get("unseen_texels"):
@@ -76,11 +84,21 @@ def cmd_recover(args):
 
 
 def cmd_relight(args):
-    from mi_dsbrdf.app.render import relight
     if os.path.exists(args.out) and not args.force:
-        raise MiDsbrdfError("%s exists; pass --force to replace it" % args.out)
+        raise InputError("%s exists; pass --force to replace it" % args.out)
     r = relight(args.material, args.envmap, args.out, shape=args.shape, res=args.res, spp=args.spp)
     print("relit in %.1f s -> %s, %s" % (r["seconds"], r["exr"], r["png"]))
+
+
+def _config_arguments(p, preset):
+    """--preset and the overrides of its most used settings."""
+    c = PRESETS[preset]
+    p.add_argument("--preset", default=preset, choices=sorted(PRESETS),
+                   help="named inference settings (default %s: map %dx%d, %d rounds, %d iterations)"
+                   % ((preset,) + c.map_size + (c.max_rounds, c.block_iters)))
+    p.add_argument("--map-size", default=None, type=_map_size, help="illumination map HxW (overrides the preset)")
+    p.add_argument("--rounds", type=int, default=None, help="rounds of alternating blocks per pass")
+    p.add_argument("--iters", type=int, default=None, help="Levenberg-Marquardt iterations per reflectance block")
 
 
 def main(argv=None):
@@ -101,9 +119,7 @@ def main(argv=None):
     p.add_argument("--out", default="out/demo")
     p.add_argument("--material", default="gold-metallic-paint", help="library material of the observed sphere")
     p.add_argument("--res", type=int, default=64, help="image size (default 64)")
-    p.add_argument("--map-size", default=(16, 32), type=_map_size, help="illumination map HxW (default 16x32)")
-    p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--iters", type=int, default=15)
+    _config_arguments(p, "demo")
     p.add_argument("--spp", type=int, default=256, help="samples per pixel of the renders")
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=cmd_demo)
@@ -125,9 +141,7 @@ def main(argv=None):
     p.add_argument("--image", required=True, help="observed HDR image (EXR/HDR), film-sized")
     p.add_argument("--mask", default=None, help="optional mask image (white = use)")
     p.add_argument("--out", required=True, help="result directory")
-    p.add_argument("--map-size", default=(32, 64), type=_map_size, help="illumination map HxW (default 32x64, the benchmarked size)")
-    p.add_argument("--rounds", type=int, default=3, help="rounds of alternating blocks per pass (default 3)")
-    p.add_argument("--iters", type=int, default=15, help="Levenberg-Marquardt iterations per reflectance block (default 15)")
+    _config_arguments(p, "benchmarked")
     p.add_argument("--force", action="store_true", help="write into an existing non-empty directory")
     p.set_defaults(func=cmd_recover)
 
@@ -145,7 +159,7 @@ def main(argv=None):
     try:
         _setup(args.variant)
         args.func(args)
-    except (MiDsbrdfError, FileNotFoundError, ValueError, RuntimeError, ImportError) as e:
+    except (MiDsbrdfError, OSError) as e:
         print("mi-dsbrdf: %s" % e, file=sys.stderr)
         return 1
     return 0

@@ -17,7 +17,20 @@ import json
 import os
 import time
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
+
+from mi_dsbrdf import load_material
+from mi_dsbrdf.app.io import prepare_out, read_image, save_preview, write_exr
+from mi_dsbrdf.app.recover import recover_files
+from mi_dsbrdf.app.scenes import camera
+from mi_dsbrdf.config import PRESETS, Config
+from mi_dsbrdf.evaluation.experiment import scale_invariant_log_error
+from mi_dsbrdf.evaluation.metrics import material_error
+from mi_dsbrdf.inference.latlong import direction_to_uv, texel_solid_angles
+from mi_dsbrdf.model.model_file import shipped_model
+from mi_dsbrdf.model.samples import samples_from_function
 
 #: The sun of the observed image and of the relighting sky (world, y up, towards the sun).
 SUN = (0.5, 0.6, 0.62)
@@ -28,7 +41,6 @@ def sunsky(sun, sun_scale=1.0) -> dict:
     """A Mitsuba ``sunsky`` emitter with its sun towards the world direction ``sun``
     (``sun_direction`` is taken in world space; ``to_world`` turns the plugin's
     z-up sky dome to this scene's y-up)."""
-    import mitsuba as mi
     s = np.asarray(sun, dtype=np.float64) / np.linalg.norm(sun)
     return {"type": "sunsky", "sun_direction": [float(v) for v in s], "sun_scale": sun_scale,
             "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90)}
@@ -38,9 +50,6 @@ def latlong_of(emitter_dict, height=16, width=32, samples=1 << 20, seed=0) -> np
     """(H, W, 3) mean radiance per texel of an environment emitter, estimated by
     splatting the emitter's own direction samples (it samples its sun, which a
     grid of directions would miss)."""
-    import drjit as dr
-    import mitsuba as mi
-    from mi_dsbrdf.inference.latlong import direction_to_uv, texel_solid_angles
     scene = mi.load_dict({"type": "scene", "e": emitter_dict})
     em = scene.emitters()[0]
     rng = np.random.default_rng(seed)
@@ -77,21 +86,13 @@ def scene_xml(res, envmap) -> str:
 def brdf_error(material, truth) -> float:
     """Eq. 20 of ``material`` against ``truth`` (a library material) on the MERL
     grid cells the fits use."""
-    from mi_dsbrdf.model.fitting import samples_from_function
-    from mi_dsbrdf.evaluation.metrics import material_error
     return material_error(material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
 
 
-def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3, iters=15, spp=256,
+def run(out, material="gold-metallic-paint", res=64, config: Config = PRESETS["demo"], spp=256,
         force=False) -> dict:
-    import mitsuba as mi
-    from mi_dsbrdf import load_material
-    from mi_dsbrdf.inference.latlong import write_exr
-    from mi_dsbrdf.evaluation.experiment import scale_invariant_log_error
-    from mi_dsbrdf.model.model_file import shipped_model
-    from mi_dsbrdf.app.recover import prepare_out, read_image, recover_files
-    from mi_dsbrdf.app.render import save_preview
-    from mi_dsbrdf.app.scenes import camera
+    """Render, recover (with ``config``) and report into the folder ``out``; returns the report dict."""
+    map_size = config.map_size
     prepare_out(out, force)
     t0 = time.perf_counter()
     # 1. the observed image
@@ -105,8 +106,7 @@ def run(out, material="gold-metallic-paint", res=64, map_size=(16, 32), rounds=3
     with open(scene_file, "w") as f:
         f.write(scene_xml(res, "placeholder.exr"))
     rec = os.path.join(out, "recovered")
-    log = recover_files(scene_file, os.path.join(out, "observed.exr"), rec, force=force, map_size=map_size,
-                        rounds=rounds, iters=iters)
+    log = recover_files(scene_file, os.path.join(out, "observed.exr"), rec, force=force, config=config)
     # 3. report
     truth = load_material(material)
     found = load_material(os.path.join(rec, "material.json"))

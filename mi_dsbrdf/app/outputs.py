@@ -10,7 +10,12 @@ from __future__ import annotations
 
 import os
 
+import mitsuba as mi
 import numpy as np
+
+from mi_dsbrdf.app.io import save_preview
+from mi_dsbrdf.app.scenes import camera
+from mi_dsbrdf.inference.latlong import procedural_sky
 
 
 def write_scene_xml(scene_file, out_file, material_file, light) -> None:
@@ -20,7 +25,6 @@ def write_scene_xml(scene_file, out_file, material_file, light) -> None:
     | {"type": "point", "position", "intensity"} (direction: object -> light).
     Relative file names of the input scene (meshes, textures) are made absolute
     so that the new scene loads from its own folder."""
-    import mitsuba as mi
     base = os.path.dirname(os.path.abspath(os.fspath(scene_file)))
     state = mi.parser.parse_file(mi.parser.ParserConfig(mi.variant()), os.fspath(scene_file))
     for node in state.nodes:
@@ -53,10 +57,6 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
     """PNG of the material on three spheres (Mitsuba, ``direct`` integrator): lit
     from the upper left, from the side (grazing angles) and by the shipped
     procedural sky."""
-    import mitsuba as mi
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    from mi_dsbrdf.app.render import save_preview
-    from mi_dsbrdf.app.scenes import camera
     lights = [{"type": "directional", "direction": [0.5, -0.6, -0.62], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "directional", "direction": [-1.0, -0.3, 0.1], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "envmap", "bitmap": mi.Bitmap(procedural_sky(64, 128))}]
@@ -74,7 +74,6 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
 def illumination_preview(log_map_or_map, path, seen=None, scale=8) -> None:
     """PNG of a lat-long map (nearest-neighbour enlarged ``scale`` times), its
     exposure set by the median of the seen texels; unseen texels hatched grey."""
-    from mi_dsbrdf.app.render import save_preview
     L = np.asarray(log_map_or_map, dtype=np.float64)
     seen = np.ones(L.shape[:2], bool) if seen is None else np.asarray(seen, bool)
     med = np.median(L[seen].mean(axis=-1)) if seen.any() else 1.0

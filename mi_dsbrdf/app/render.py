@@ -4,12 +4,17 @@ from __future__ import annotations
 import os
 import time
 
+import mitsuba as mi
 import numpy as np
+
+from mi_dsbrdf.app.io import save_preview, write_exr
+from mi_dsbrdf.app.scenes import camera, shape_dict
+from mi_dsbrdf.errors import InputError
+from mi_dsbrdf.model.library import library_names
 
 
 def render_scene(scene_file, spp=None, **params) -> np.ndarray:
     """Render a scene XML (with ``<default>`` overrides ``params``) to (H, W, 3) float32."""
-    import mitsuba as mi
     scene = mi.load_file(os.fspath(scene_file), **{k: str(v) for k, v in params.items()})
     img = mi.render(scene, spp=spp or 0)
     img = np.array(img, dtype=np.float32)
@@ -18,17 +23,8 @@ def render_scene(scene_file, spp=None, **params) -> np.ndarray:
     return img
 
 
-def save_preview(image, path, exposure=0.0) -> None:
-    """sRGB PNG of a linear HDR image (scaled by 2^exposure, clipped)."""
-    import mitsuba as mi
-    img = np.ascontiguousarray(np.asarray(image, dtype=np.float32) * 2.0 ** exposure)
-    bmp = mi.Bitmap(img, mi.Bitmap.PixelFormat.RGB)
-    bmp.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(os.fspath(path))
-
-
 def render_to_files(scene_file, out_stem, spp=None, **params) -> dict:
     """Render and write ``<out_stem>.exr`` and ``<out_stem>.png``; returns paths and time."""
-    from mi_dsbrdf.inference.latlong import write_exr
     t0 = time.perf_counter()
     img = render_scene(scene_file, spp=spp, **params)
     seconds = time.perf_counter() - t0
@@ -41,19 +37,15 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
     """Render a recovered (or library) material on ``shape`` under a lat-long
     ``envmap_file`` with Mitsuba's path tracer; writes ``out_file`` (EXR) and a
     PNG beside it. ``material_file``: a material.json or a library name."""
-    import mitsuba as mi
-    from mi_dsbrdf.errors import MiDsbrdfError
-    from mi_dsbrdf.model.library import library_names
-    from mi_dsbrdf.app.scenes import camera, shape_dict
     bsdf = {"type": "dsbrdf"}
     if os.path.exists(os.fspath(material_file)):
         bsdf["filename"] = os.path.abspath(os.fspath(material_file))
     elif str(material_file) in library_names():
         bsdf["material"] = str(material_file)
     else:
-        raise MiDsbrdfError("material %s is neither a file nor a library material" % material_file)
+        raise InputError("material %s is neither a file nor a library material" % material_file)
     if not os.path.exists(os.fspath(envmap_file)):
-        raise MiDsbrdfError("envmap %s does not exist" % envmap_file)
+        raise InputError("envmap %s does not exist" % envmap_file)
     obj = shape_dict(shape, bsdf)
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "path", "max_depth": 4},
@@ -63,7 +55,6 @@ def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=6
     img = np.array(mi.render(scene, spp=spp), dtype=np.float32)
     if not np.all(np.isfinite(img)):
         raise FloatingPointError("relighting produced non-finite pixels")
-    from mi_dsbrdf.inference.latlong import write_exr
     write_exr(out_file, img)
     png = os.path.splitext(os.fspath(out_file))[0] + ".png"
     save_preview(img, png)

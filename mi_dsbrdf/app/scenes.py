@@ -9,6 +9,14 @@ from __future__ import annotations
 
 import os
 
+import mitsuba as mi
+import numpy as np
+import trimesh
+
+from mi_dsbrdf.errors import MiDsbrdfError
+from mi_dsbrdf.app.io import write_exr
+from mi_dsbrdf.inference.latlong import procedural_sky
+
 SCENE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "scenes")
 SCENES = {
     "sphere_envmap": "sphere_envmap.xml",
@@ -22,7 +30,6 @@ def camera(res: int, fov: float = 30.0, box_filter: bool = True) -> dict:
     """The shipped scenes' camera as a Mitsuba dict: perspective, at distance 4
     on +z looking at the origin, a res x res film (box filter: one pixel, one
     footprint, as the texel-sum forward model assumes)."""
-    import mitsuba as mi
     film = {"type": "hdrfilm", "width": res, "height": res}
     if box_filter:
         film["rfilter"] = {"type": "box"}
@@ -38,7 +45,6 @@ SHAPES = ("sphere", "torus")
 def shape_dict(shape: str, bsdf) -> dict:
     """Mitsuba dict of ``shape`` (``sphere``, the shipped non-convex ``torus``, or a
     .ply/.obj mesh file) carrying ``bsdf`` (a dict or a BSDF instance)."""
-    from mi_dsbrdf.errors import MiDsbrdfError
     if shape == "sphere":
         obj = {"type": "sphere"}
     elif shape == "torus":
@@ -54,7 +60,6 @@ def shape_dict(shape: str, bsdf) -> dict:
 def sphere_scene(bsdf: dict, res: int = 24, fov: float = 30.0):
     """A unit sphere with ``bsdf`` seen by :func:`camera`, no light: a small scene
     for the texel-sum forward model (:mod:`mi_dsbrdf.inference.forward`), which brings its own."""
-    import mitsuba as mi
     return mi.load_dict({"type": "scene", "sensor": camera(res, fov), "object": {"type": "sphere", "bsdf": bsdf}})
 
 
@@ -69,8 +74,6 @@ def scene_path(name_or_path: str) -> str:
 
 def make_torus(path, major=0.7, minor=0.3, sections=96, tube=48) -> None:
     """Write a torus (axis tilted 60 deg from the view axis) with vertex normals as PLY."""
-    import numpy as np
-    import trimesh
     mesh = trimesh.creation.torus(major_radius=major, minor_radius=minor,
                                   major_sections=sections, minor_sections=tube)
     mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(60), [1, 0, 0]))
@@ -79,7 +82,6 @@ def make_torus(path, major=0.7, minor=0.3, sections=96, tube=48) -> None:
 
 
 def build_assets(scene_dir: str = SCENE_DIR) -> list:
-    from mi_dsbrdf.inference.latlong import procedural_sky, write_exr
     torus = os.path.join(scene_dir, "meshes", "torus.ply")
     sky = os.path.join(scene_dir, "textures", "sky.exr")
     make_torus(torus)

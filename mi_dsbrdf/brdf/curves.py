@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import numpy as np
 
 from mi_dsbrdf.brdf.xp import ops
@@ -134,7 +135,6 @@ class CurveBasis:
     def control_values_dr(self, psi):
         """The same map for a Dr.Jit Float ``psi`` (differentiable): a flat
         Float of R*2*6 control values in (lobe, curve, j) order."""
-        import drjit as dr
         Float = type(psi)
         flat_mean = self.mean.reshape(-1)
         flat_bases = self.bases.reshape(self.n_bases, -1)

@@ -24,8 +24,8 @@ import numpy as np
 
 from mi_dsbrdf.brdf.angles import log_cos_h
 from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
-from mi_dsbrdf.errors import MaterialError
 from mi_dsbrdf.brdf.xp import expm1, ops
+from mi_dsbrdf.errors import MaterialError
 
 MAX_LOBES = 3
 KAPPA_MAX = 85.0

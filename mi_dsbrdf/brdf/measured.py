@@ -17,15 +17,15 @@ the ``merl`` plugin uses the same index arithmetic as :meth:`MeasuredBRDF.lookup
 """
 from __future__ import annotations
 
-import hashlib
+import difflib
 import math
 import os
 
 import numpy as np
 
 from mi_dsbrdf.brdf.angles import fold_phi_d
-from mi_dsbrdf.errors import MeasuredFileError
 from mi_dsbrdf.brdf.xp import ops
+from mi_dsbrdf.errors import MeasuredFileError
 
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
 SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
@@ -185,15 +185,6 @@ def is_linear(interpolation) -> bool:
     return interpolation == "linear"
 
 
-def git_blob_id(path) -> str:
-    """``git hash-object`` of a file: checks a MERL copy against the published ids."""
-    with open(path, "rb") as f:
-        data = f.read()
-    return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
-
-
-# --- neural fits (NBRDF) ----------------------------------------------------------
-
 def nbrdf_names(npz_path) -> list:
     with _open_npz(npz_path) as f:
         return [str(n) for n in f["names"]]
@@ -203,7 +194,6 @@ def load_nbrdf_weights(npz_path, name) -> dict:
     with _open_npz(npz_path) as f:
         names = [str(n) for n in f["names"]] if "names" in f.files else []
         if name not in names:
-            import difflib
             close = difflib.get_close_matches(name, names, n=3)
             raise MeasuredFileError("no material %r in %s%s" % (
                 name, npz_path, ("; did you mean %s?" % ", ".join(close)) if close else ""))

@@ -7,6 +7,7 @@ reference the tests hold the Dr.Jit kernel to.
 """
 from __future__ import annotations
 
+import drjit as dr
 import numpy as np
 
 
@@ -32,7 +33,6 @@ class _DrJit:
     name = "drjit"
 
     def __init__(self):
-        import drjit as dr
         self.dr = dr
         self.sqrt = dr.safe_sqrt
         self.acos = dr.safe_acos

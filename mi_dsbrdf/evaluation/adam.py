@@ -18,15 +18,18 @@ from __future__ import annotations
 
 import time
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
+
+from mi_dsbrdf.app.scenes import camera, shape_dict
+from mi_dsbrdf.brdf.dsbrdf import Material
 
 #: Adam's learning rate for the BSDF variables and for the log illumination
 LR_BSDF, LR_MAP = 0.02, 0.05
 
 
 def _scene(bsdf, res, map_hw, shape, level):
-    import mitsuba as mi
-    from mi_dsbrdf.app.scenes import camera, shape_dict
     H, W = map_hw
     env = mi.Bitmap(np.full((H, W, 3), level, dtype=np.float32))
     return mi.load_dict({"type": "scene", "integrator": {"type": "prb", "max_depth": 2 if shape == "sphere" else 3},
@@ -41,8 +44,6 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     Returns {"bsdf": the Mitsuba BSDF (principled) or a DSBRDF Material,
     "map": (H, W, 3) float64, "rows": [{"round", "neg_log_posterior", "seconds"}]}.
     """
-    import drjit as dr
-    import mitsuba as mi
     if method == "principled-adam":
         bsdf = {"type": "principled", "base_color": {"type": "rgb", "value": [0.5, 0.5, 0.5]},
                 "roughness": 0.5, "metallic": 0.0, "specular": 0.5}
@@ -88,7 +89,6 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     params.update(opt)
     env = np.array(params["emitter.data"], np.float64)[:, 1:-1, :3]
     if method == "dsbrdf-adam":
-        from mi_dsbrdf.brdf.dsbrdf import Material
         psi = np.array(params["object.bsdf.psi"], np.float64)
         chroma = np.array(params["object.bsdf.chromaticity"], np.float64).reshape(R, 3)
         fitted = Material.from_basis(model.basis, psi, chroma)

@@ -35,13 +35,29 @@ import math
 import os
 import time
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
+
+from mi_dsbrdf.app.io import read_image
+from mi_dsbrdf.app.scenes import camera, shape_dict
+from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.brdf.measured import MeasuredBRDF
+from mi_dsbrdf.evaluation.adam import adam_recover
+from mi_dsbrdf.config import NO_PRIORS, Config
+from mi_dsbrdf.evaluation.metrics import (bsdf_values, direction_error_deg, log_rmse, log_rmse_scale_invariant,
+                                          scale_invariant_log_error)
+from mi_dsbrdf.inference.envmap import recover_envmap
+from mi_dsbrdf.inference.light import recover_light
+from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.model import model_file as model_data
+from mi_dsbrdf.model.build import build_from_fits, save_model, stored_fits
+from mi_dsbrdf.model.samples import samples_from_table
 
 #: probes used for relighting (the first two that differ from the case's probe)
 RELIGHT_PROBES = ["probulator/pisa.hdr", "probulator/uffizi.hdr", "probulator/ennis.hdr"]
 #: point light of the point cases: distance from the object's centre, intensity (W/sr)
 POINT_DISTANCE, POINT_INTENSITY = 5.0, 40.0
-NO_PRIORS = dict(w_gmm=0.0, w_hue=0.0, w_entropy=0.0, w_gradient=0.0)
 
 
 # --- scenes and truth ---------------------------------------------------------------
@@ -63,9 +79,6 @@ def downsample(env, height, width) -> np.ndarray:
 def texels(bsdf: dict, res: int, map_hw=(1, 1), shape="sphere"):
     """A :class:`~mi_dsbrdf.inference.forward.TexelSum` of ``shape`` (:func:`~mi_dsbrdf.app.scenes.shape_dict`;
     anything but the sphere with shadow rays) carrying ``bsdf``, seen by the shipped camera."""
-    import mitsuba as mi
-    from mi_dsbrdf.inference.forward import TexelSum
-    from mi_dsbrdf.app.scenes import camera, shape_dict
     scene = mi.load_dict({"type": "scene", "sensor": camera(res), "object": shape_dict(shape, bsdf)})
     return TexelSum(scene, scene.shapes()[0], tuple(map_hw), visibility=shape != "sphere")
 
@@ -74,10 +87,10 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
     """(H, W, 3) image of a TexelSum under a map (T, 3) (``illumination``) or one
     light: ``direction`` (irradiance 3) or ``point`` position (intensity 40)."""
     if point is not None:
-        ts.set_point(point)
+        ts = ts.with_point(point)
         illumination = np.full((1, 3), POINT_INTENSITY)
     elif direction is not None:
-        ts.set_directions(np.asarray(direction)[None], [1.0])
+        ts = ts.with_directions(np.asarray(direction)[None], [1.0])
         illumination = np.full((1, 3), 3.0)
     h, w = ts.image_size
     img = np.zeros((h * w, 3))
@@ -88,8 +101,6 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
 def loo_model(name, cache):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
     library from the other 99 fits; cached as ``cache/loo-<name>.npz``)."""
-    from mi_dsbrdf.model import model_file as model_data
-    from mi_dsbrdf.model.build import build_from_fits, save_model, stored_fits
     path = os.path.join(cache, "loo-%s.npz" % name)
     if not os.path.exists(path):
         fits = stored_fits(model_data.shipped_model().arrays)
@@ -100,27 +111,8 @@ def loo_model(name, cache):
 def specularity(name) -> float:
     """gamma of the most specular lobe of the material's DSBRDF fit at theta_d = 0
     (the x axis of paper Fig. 8)."""
-    from mi_dsbrdf.model import model_file as model_data
     m = model_data.shipped_model().library_material(name)
     return float(np.exp(m.log_gamma[:, 0]).max())
-
-
-# --- metrics ------------------------------------------------------------------------
-
-def direction_error_deg(a, b) -> float:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    c = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
-
-
-def scale_invariant_log_error(values, truth, mask) -> float:
-    """Eq. 20's measure on images or illumination maps: the RMSE of
-    log(1 + s v / m) - log(1 + t / m) over ``mask`` (H, W), m the truth's mean
-    there, at the best scale s of ``values`` (light and material trade scale)."""
-    from mi_dsbrdf.evaluation.metrics import log_rmse_scale_invariant
-    t = np.asarray(truth, np.float64)[mask]
-    ref = max(float(t.mean()), 1e-300)
-    return log_rmse_scale_invariant(np.asarray(values, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]))[0]
 
 
 def _normalised_pair(truth, values, mask) -> np.ndarray:
@@ -131,26 +123,8 @@ def _normalised_pair(truth, values, mask) -> np.ndarray:
     return np.clip(np.stack([t, s * v]) / ref, 0, 6e4).astype(np.float16)
 
 
-def bsdf_values(bsdf, samples) -> np.ndarray:
-    """(N, 3) BRDF values (1/sr) of any Mitsuba BSDF at the angles of MERL
-    :class:`~mi_dsbrdf.model.fitting.Samples` (eval / cos theta_o): scores baselines on
-    the same grid as the DSBRDF."""
-    import drjit as dr
-    import mitsuba as mi
-    from mi_dsbrdf.brdf.angles import from_half_diff
-    wi, wo = from_half_diff(samples.theta_h, samples.theta_d, samples.phi_d)
-    n = samples.theta_h.shape[0]
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = mi.Vector3f(*(np.asarray(c, np.float32) for c in wi))
-    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
-    si.n = mi.Normal3f(0, 0, 1)
-    v = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(np.asarray(c, np.float32) for c in wo)))
-    return np.array(v, dtype=np.float64).T.reshape(n, 3) / np.asarray(wo[2], np.float64)[:, None]
-
-
 def dsbrdf_bsdf(material):
     """The ``dsbrdf`` plugin instance of a :class:`~mi_dsbrdf.brdf.dsbrdf.Material`."""
-    import mitsuba as mi
     props = {"type": "dsbrdf", "lobes": int(material.n_lobes)}
     for r in range(material.n_lobes):
         for key, values in (("kappa", np.exp(material.log_kappa[r])), ("gamma", np.exp(material.log_gamma[r])),
@@ -178,13 +152,6 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     folder holding ``merl/merl_nbrdf_weights.npz`` and ``envmaps/``; ``cache``:
     where leave-one-out models are kept; ``threads``: Dr.Jit's thread count (0:
     leave it). Returns a JSON-ready dict, plus numpy ``images`` for the report."""
-    import drjit as dr
-    from mi_dsbrdf.inference import envmap as inference
-    from mi_dsbrdf.brdf.dsbrdf import Material
-    from mi_dsbrdf.model.fitting import samples_from_table
-    from mi_dsbrdf.brdf.measured import MeasuredBRDF
-    from mi_dsbrdf.evaluation.metrics import log_rmse, log_rmse_scale_invariant
-    from mi_dsbrdf.app.recover import read_image
     if threads:
         dr.set_thread_count(threads)
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
@@ -196,8 +163,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     shape = case.get("shape", "sphere")
     method = case.get("method", "dsbrdf")
     weights = case.get("weights", {}) if case.get("priors", True) else NO_PRIORS
-    cfg = inference.Config(map_size=(H, W), max_rounds=case.get("rounds", 3), block_iters=case.get("iters", 15),
-                           **weights)
+    cfg = Config(map_size=(H, W), max_rounds=case.get("rounds", 3), block_iters=case.get("iters", 15), **weights)
     out = {"case": case, "specularity": specularity(name)}
     t0 = time.perf_counter()
     if case["kind"] == "point":
@@ -205,12 +171,12 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         ts = texels(merl, res, shape=shape)
         img = render(ts, point=POINT_DISTANCE * d_true)
         ts = texels({"type": "dsbrdf"}, res, shape=shape)
-        result, rows = inference.recover_light(ts, img, ts.mask, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
+        result = recover_light(ts, img, ts.mask, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
-        material = Material.from_basis(model.basis, result["psi"], result["chromaticity"])
+        material, rows = result.material, result.log
         values = material.eval(samples.theta_h, samples.theta_d)
-        out["direction_error_deg"] = direction_error_deg(result["direction"], d_true)
-        out["intensity_ratio"] = result["intensity"] / POINT_INTENSITY
+        out["direction_error_deg"] = direction_error_deg(result.light["direction"], d_true)
+        out["intensity_ratio"] = result.light["intensity"] / POINT_INTENSITY
         out["brdf_eq5"] = log_rmse(values * out["intensity_ratio"], samples.values, samples.cos_i)
     else:
         probe = read_image(os.path.join(data, "envmaps", case["probe"]))
@@ -219,14 +185,11 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         img = render(ts, truth.reshape(-1, 3))
         if method == "dsbrdf":
             ts = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)
-            state, rows = inference.recover(ts, img, ts.mask, model, cfg)
+            result = recover_envmap(ts, img, ts.mask, model, cfg)
             out["seconds"] = time.perf_counter() - t0
-            material = Material.from_basis(model.basis, state.psi, state.chromaticity)
+            material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
             values = material.eval(samples.theta_h, samples.theta_d)
-            seen = state.log_map[..., 0] > inference.BLACK
-            recovered_map = np.where(seen[..., None], np.exp(state.log_map), 0.0)
         else:
-            from mi_dsbrdf.evaluation.adam import adam_recover
             fit = adam_recover(img, ts.mask, res, (H, W), method, model, spp=case.get("spp", 16),
                                iters=case.get("iters", 100), shape=shape, seed=0)
             out["seconds"] = time.perf_counter() - t0
@@ -251,7 +214,6 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
 def _relight(case, material, merl, data, res=48, map_hw=(32, 64)):
     """Relit image errors under two probes other than the case's, and the images
     (truth, recovered) for the report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
-    from mi_dsbrdf.app.recover import read_image
     probes = [p for p in RELIGHT_PROBES if p != case.get("probe")][:2]
     bsdf = dsbrdf_bsdf(material) if hasattr(material, "log_kappa") else material
     errors, images = {}, {}

@@ -18,6 +18,10 @@ With the reflectance fixed, the image is linear in L: I = T L, and
 """
 from __future__ import annotations
 
+import copy
+
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_solid_angles
@@ -39,8 +43,6 @@ class TexelSum:
     """
 
     def __init__(self, scene, shape, map_size, visibility=False, to_world=None):
-        import drjit as dr
-        import mitsuba as mi
         sensor = scene.sensors()[0]
         w, h = (int(v) for v in sensor.film().crop_size())
         self.image_size = (h, w)
@@ -62,37 +64,45 @@ class TexelSum:
             d = d @ np.asarray(to_world, dtype=np.float64)[:3, :3].T
             d /= np.linalg.norm(d, axis=1, keepdims=True)
         self._scene, self._trace = scene, visibility
-        self.set_directions(d, texel_solid_angles(H, W).reshape(-1))
+        self._light(d, texel_solid_angles(H, W).reshape(-1), None)
 
-    def set_directions(self, directions, solid_angles):
-        """Light from these world directions (T, 3) with these solid angles (T,)
+    # A TexelSum is never changed once made: a new light, BSDF or pixel subset
+    # is a new (shallow) copy that shares the geometry.
+    def with_directions(self, directions, solid_angles) -> "TexelSum":
+        """This view lit from the world directions (T, 3) with solid angles (T,)
         instead of the map's texels: one direction with solid angle 1 makes the
         sum a directional light whose 'radiance' is its irradiance."""
-        self.directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        self.solid_angles = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
-        self.light_position = None
-        self.visibility = self._trace_visibility(self._scene) if self._trace else None
+        out = copy.copy(self)
+        out._light(np.asarray(directions, dtype=np.float64).reshape(-1, 3),
+                   np.asarray(solid_angles, dtype=np.float64).reshape(-1), None)
+        return out
 
-    def set_point(self, position):
-        """Light from a point at ``position`` (world): one 'texel' whose direction
-        and solid angle 1/r^2 differ per pixel, so that its 'radiance' is the
-        point light's intensity (W/sr, Mitsuba's ``point`` emitter)."""
+    def with_point(self, position) -> "TexelSum":
+        """This view lit from a point at ``position`` (world): one 'texel' whose
+        direction and solid angle 1/r^2 differ per pixel, so that its 'radiance'
+        is the point light's intensity (W/sr, Mitsuba's ``point`` emitter)."""
         p = np.asarray(position, dtype=np.float64).reshape(3)
         x = np.array(self.si.p, dtype=np.float64).T
         d = p - x
         r2 = np.maximum((d * d).sum(axis=1), 1e-12)
-        self.directions = d / np.sqrt(r2)[:, None]          # (P, 3): per pixel
-        self.solid_angles = 1.0 / r2                        # (P,)
-        self.light_position = p
+        out = copy.copy(self)
+        out._light(d / np.sqrt(r2)[:, None], 1.0 / r2, p)      # (P, 3), (P,): per pixel
+        return out
+
+    def with_bsdf(self, bsdf) -> "TexelSum":
+        """This view with the object's BSDF replaced by ``bsdf`` (a mi.BSDF)."""
+        out = copy.copy(self)
+        out.bsdf = bsdf
+        return out
+
+    def _light(self, directions, solid_angles, position):
+        self.directions, self.solid_angles, self.light_position = directions, solid_angles, position
         self.visibility = self._trace_visibility(self._scene) if self._trace else None
 
     def subset(self, rows) -> "TexelSum":
         """The same view restricted to the pixels ``self.pixels[rows]`` (sharing the
         light directions): the reflectance block fits 16 variables and needs far
         fewer pixels than the illumination block, whose unknowns are the texels."""
-        import copy
-        import drjit as dr
-        import mitsuba as mi
         rows = np.asarray(rows, dtype=np.int64)
         sub = copy.copy(self)
         sub.pixels = self.pixels[rows]
@@ -112,8 +122,6 @@ class TexelSum:
 
     def _pairs(self, t0, t1):
         """Lanes for texels [t0, t1) x all pixels (pixel-major): (si, wo_local, pixel, texel)."""
-        import drjit as dr
-        import mitsuba as mi
         P, nt = self.n_pixels, t1 - t0
         lane = dr.arange(mi.UInt32, P * nt)
         pix = lane // nt
@@ -128,8 +136,6 @@ class TexelSum:
         return [(t, min(t + step, self.n_texels)) for t in range(0, self.n_texels, step)]
 
     def _trace_visibility(self, scene):
-        import drjit as dr
-        import mitsuba as mi
         vis = np.zeros((self.n_pixels, self.n_texels), dtype=bool)
         for t0, t1 in self._chunks():
             si, wo, _, _ = self._pairs(t0, t1)
@@ -144,8 +150,6 @@ class TexelSum:
 
     def _weights(self, si, wo, pix, tex, t0, t1):
         """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f."""
-        import drjit as dr
-        import mitsuba as mi
         ctx = mi.BSDFContext()
         f = self.bsdf.eval(ctx, si, wo)
         omega = dr.gather(mi.Float, mi.Float(self.solid_angles.astype(np.float32)),
@@ -159,7 +163,6 @@ class TexelSum:
     def transport(self) -> np.ndarray:
         """(3, P, T) float32 transport, channel-major so that the products with a
         map are matrix-vector products: radiance[p, c] = T[c, p] @ L[:, c]."""
-        import drjit as dr
         out = np.zeros((3, self.n_pixels, self.n_texels), dtype=np.float32)
         with dr.suspend_grad():
             for t0, t1 in self._chunks():
@@ -175,8 +178,6 @@ class TexelSum:
     def _radiance_chunks(self, illumination):
         """Yield (P,) Color3f radiance from each chunk of texels under
         ``illumination`` (T, 3), with whatever AD graph the BSDF parameters carry."""
-        import drjit as dr
-        import mitsuba as mi
         L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
         Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
         for t0, t1 in self._chunks():
@@ -184,33 +185,10 @@ class TexelSum:
             f = self._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
             yield dr.block_sum(f, t1 - t0)                   # (P,) radiance from these texels
 
-    def reflectance_gradient(self, illumination, grad_pixels, params, keys):
-        """Pixel radiance and the gradient of sum(grad_pixels * I) w.r.t. the
-        BSDF parameters ``keys`` of ``params`` (a mi.SceneParameters / traverse
-        of the BSDF whose entries have gradients enabled by the caller).
-
-        ``grad_pixels``: (P, 3) float64, d loss / d I. Chunks are differentiated
-        one at a time (the image is a sum over texels), so memory stays bounded.
-        Returns (I (P, 3) float64, {key: gradient numpy array}).
-        """
-        import drjit as dr
-        import mitsuba as mi
-        G = mi.Color3f(*(mi.Float(np.asarray(grad_pixels, dtype=np.float32)[:, c]) for c in range(3)))
-        image = np.zeros((self.n_pixels, 3))
-        grads = {k: 0.0 for k in keys}
-        for partial in self._radiance_chunks(illumination):
-            image += np.array(dr.detach(partial)).T
-            dr.backward_from(dr.sum(dr.sum(partial * G), axis=None))
-            for k in keys:
-                grads[k] = grads[k] + np.array(dr.grad(params[k]), dtype=np.float64)
-                dr.clear_grad(params[k])
-        return image, grads
-
     def reflectance_jacobian(self, illumination, params, keys):
         """Pixel radiance (P, 3) and its Jacobian (P, 3, n) with respect to the BSDF
         parameters ``keys`` of ``params`` (gradients enabled by the caller), by
         forward-mode AD through the plugin, one chunk of texels at a time."""
-        import drjit as dr
         image, jac = np.zeros((self.n_pixels, 3)), None
         for partial in self._radiance_chunks(illumination):
             image += np.array(dr.detach(partial)).T
@@ -246,7 +224,6 @@ def unseen_texels(transport, threshold=1e-6) -> np.ndarray:
 def _forward_columns(partial, variables):
     """Forward-mode derivatives of ``partial`` (a Color3f of P pixels) with respect
     to every entry of every Float in ``variables``: a (P, 3, n) float64 array."""
-    import drjit as dr
     cols = []
     for var in variables:
         n = dr.width(var)

@@ -13,7 +13,6 @@ v = acos(d_y) / pi. Its solid angle is (2 pi / W)(cos theta_0 - cos theta_1).
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
@@ -64,10 +63,3 @@ def procedural_sky(height=64, width=128, sun_direction=(0.5, 0.7, -0.5), sun_rad
         radiance = sun_to_sky * sky_irr / (sun_omega * max(s[1], 1e-3))
         env[sun] = radiance * np.array([1.0, 0.92, 0.8])
     return env.astype(np.float32)
-
-
-def write_exr(path, image) -> None:
-    """Write an (H, W, 3) float array as a float32 RGB EXR."""
-    import mitsuba as mi
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), mi.Bitmap.PixelFormat.RGB).write(os.fspath(path))

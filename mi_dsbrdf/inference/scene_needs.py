@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import dataclasses
 
+import mitsuba as mi
 import numpy as np
+import trimesh
 
 from mi_dsbrdf.errors import MiDsbrdfError
 
@@ -42,7 +44,6 @@ class SceneNeeds:
 
 
 def light_kind(emitter) -> str:
-    import mitsuba as mi
     name = emitter.class_name() if hasattr(emitter, "class_name") else str(emitter).split("[")[0]
     flags = emitter.flags()
     if emitter.is_environment() and "Environment" in name:
@@ -62,8 +63,6 @@ def is_convex(shape) -> tuple:
     if name in ("Rectangle", "Disk"):
         return True, "a planar %s never shadows itself" % name.lower()
     if shape.is_mesh():
-        import trimesh
-        import mitsuba as mi
         params = mi.traverse(shape)
         v = np.array(params["vertex_positions"], dtype=np.float64).reshape(-1, 3)
         f = np.array(params["faces"], dtype=np.int64).reshape(-1, 3)

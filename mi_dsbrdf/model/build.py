@@ -16,17 +16,27 @@ Deterministic: the fits are deterministic and the GMM's EM is seeded.
 """
 from __future__ import annotations
 
+from concurrent.futures import ProcessPoolExecutor
 import glob
 import json
+import multiprocessing
 import os
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
+from tqdm import tqdm
 
+from mi_dsbrdf.brdf import measured
+from mi_dsbrdf.brdf.curves import CurveBasis
+from mi_dsbrdf.brdf.measured import nbrdf_names
 from mi_dsbrdf.errors import MeasuredFileError, ModelError
+from mi_dsbrdf.model import samples
+from mi_dsbrdf.model.fitting import fit_basis, fit_full
+from mi_dsbrdf.model.fpca import fpca
+from mi_dsbrdf.model.model_file import load_model
+from mi_dsbrdf.model.priors import fit_hue_concentration, select_gmm
 
 DEFAULT_K = 10
 SEED = 0
@@ -45,20 +55,17 @@ def source_names(source) -> list:
     if not os.path.exists(source):
         raise MeasuredFileError("MERL source %s does not exist (give a merl_nbrdf_weights.npz or a folder "
                                 "of .binary files)" % source)
-    from mi_dsbrdf.brdf.measured import nbrdf_names
     return nbrdf_names(source)
 
 
 def load_samples(source, name, subset=None):
-    """:class:`~mi_dsbrdf.model.fitting.Samples` of one material of a source."""
-    from mi_dsbrdf.model import fitting
-    from mi_dsbrdf.brdf import measured
+    """:class:`~mi_dsbrdf.model.samples.Samples` of one material of a source."""
     source = os.fspath(source)
     if os.path.isdir(source):
-        return fitting.samples_from_table(measured.MeasuredBRDF.from_binary(os.path.join(source, name + ".binary")),
+        return samples.samples_from_table(measured.MeasuredBRDF.from_binary(os.path.join(source, name + ".binary")),
                                           subset)
     w = measured.load_nbrdf_weights(source, name)
-    return fitting.samples_from_function(lambda th, td, pd: measured.eval_nbrdf(w, th, td, pd), subset, name)
+    return samples.samples_from_function(lambda th, td, pd: measured.eval_nbrdf(w, th, td, pd), subset, name)
 
 
 def source_kind(source) -> str:
@@ -69,7 +76,6 @@ def source_kind(source) -> str:
 
 def _fit_full_job(args):
     source, name = args
-    from mi_dsbrdf.model.fitting import fit_full
     t0 = time.perf_counter()
     f = fit_full(load_samples(source, name))
     return name, f.variables, f.material.chromaticity, f.error, f.at_bounds, time.perf_counter() - t0
@@ -77,15 +83,12 @@ def _fit_full_job(args):
 
 def _fit_basis_job(args):
     source, name, mean, bases, knots, psi0, chroma0 = args
-    from mi_dsbrdf.brdf.curves import CurveBasis
-    from mi_dsbrdf.model.fitting import fit_basis
     f = fit_basis(load_samples(source, name), CurveBasis(mean, bases, knots), psi0, chroma0)
     return name, f.variables, f.material.chromaticity, f.error
 
 
 def _map(fn, jobs, workers, desc, progress):
     """Run ``fn`` over ``jobs`` in ``workers`` processes, in job order, with a progress bar."""
-    from tqdm import tqdm
     bar = tqdm(total=len(jobs), desc=desc, disable=not progress, unit="mat", file=sys.stderr)
     out = []
     if workers <= 1:
@@ -93,7 +96,6 @@ def _map(fn, jobs, workers, desc, progress):
             out.append(fn(j))
             bar.update()
     else:
-        import multiprocessing
         # one BLAS thread per worker: the workers already fill the cores
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")
@@ -129,8 +131,6 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     and its chromaticity that of the full fit (fast, for leave-one-out studies).
     Returns the arrays of a model file.
     """
-    from mi_dsbrdf.model.fpca import fpca
-    from mi_dsbrdf.model.priors import fit_hue_concentration, select_gmm
     names = list(fits["names"])
     exclude = list(exclude)
     unknown = [n for n in exclude if n not in names]
@@ -174,7 +174,6 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     file whose stored full fits are reused instead of refitting them. Returns the arrays."""
     t0 = time.perf_counter()
     if fits_from is not None:
-        from mi_dsbrdf.model.model_file import load_model
         a = load_model(fits_from).arrays
         if "fit_controls" not in a:
             raise ModelError("%s holds no full fits to reuse" % fits_from)

@@ -2,8 +2,9 @@
 
 A fit minimises a log-space error like Eq. 5 but with a smaller offset,
 log(FIT_OFFSET + rho cos theta_i) (see :data:`FIT_OFFSET`), over measured samples
-of the MERL grid (:class:`Samples`) by Levenberg-Marquardt with an analytic
-Jacobian and box bounds (:func:`levenberg_marquardt`); errors are reported with
+of the MERL grid (:class:`~mi_dsbrdf.model.samples.Samples`) by Levenberg-Marquardt
+(:func:`mi_dsbrdf.lm.levenberg_marquardt`) with an analytic Jacobian and box
+bounds; errors are reported with
 Eq. 5. The κ/γ log-curve control values are an affine function of the free
 variables, ``ctrl = A p + b``, which covers the three models with one code path:
 
@@ -27,11 +28,13 @@ import math
 
 import numpy as np
 
-from mi_dsbrdf.brdf.angles import from_half_diff, log_cos_h
+from mi_dsbrdf.brdf.angles import log_cos_h
+from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
 from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, spline_matrix
 from mi_dsbrdf.brdf.dsbrdf import LOG_GAMMA_MAX, LOG_KAPPA_MAX, Material, clamp_controls
-from mi_dsbrdf.brdf.measured import N_PHI_D, N_THETA_D, N_THETA_H, grid_angles
 from mi_dsbrdf.evaluation.metrics import log_rmse
+from mi_dsbrdf.lm import levenberg_marquardt
+from mi_dsbrdf.model.samples import Samples
 
 N_LOBES = 3
 #: Bounds of fitted log kappa / log gamma control values. gamma >= 0.2 keeps a
@@ -50,66 +53,6 @@ SMOOTHNESS = 0.02
 STARTS = (((1.0, 60.0, 4000.0), (0.3, 0.8)),
           ((2.0, 25.0, 800.0), (0.5, 0.5)),
           ((0.5, 8.0, 200.0), (0.4, 0.7)))
-
-
-@dataclasses.dataclass(frozen=True)
-class Samples:
-    """Measured BRDF samples on the MERL grid, all directions above the horizon.
-
-    theta_h, theta_d, phi_d, cos_i : (N,) float64 (radians; cos theta_i > 0)
-    values : (N, 3) float64 BRDF values in 1/sr
-    """
-    theta_h: np.ndarray
-    theta_d: np.ndarray
-    phi_d: np.ndarray
-    cos_i: np.ndarray
-    values: np.ndarray
-    name: str = None
-
-    def __len__(self):
-        return self.theta_h.shape[0]
-
-
-def grid_subset(theta_d_step=3, phi_d_step=20):
-    """Indices (i_h, j_d, k_p) of MERL grid cells used for fitting.
-
-    Every theta_h (the square-root map is dense at the peak), every
-    ``theta_d_step``-th theta_d and every ``phi_d_step``-th phi_d, keeping only
-    cells whose incident and outgoing directions are both above the horizon
-    (cos > 1e-3). Returns three (N,) int64 arrays.
-    """
-    ih, jd, kp = np.meshgrid(np.arange(N_THETA_H), np.arange(0, N_THETA_D, theta_d_step),
-                             np.arange(0, N_PHI_D, phi_d_step), indexing="ij")
-    ih, jd, kp = ih.reshape(-1), jd.reshape(-1), kp.reshape(-1)
-    th, td, pd = grid_angles()
-    wi, wo = from_half_diff(th[ih], td[jd], pd[kp])
-    keep = (wi[2] > 1e-3) & (wo[2] > 1e-3)
-    return ih[keep], jd[keep], kp[keep]
-
-
-def samples_from_table(brdf, subset=None) -> Samples:
-    """Samples of a :class:`~mi_dsbrdf.brdf.measured.MeasuredBRDF` (unmeasured cells dropped)."""
-    ih, jd, kp = grid_subset() if subset is None else subset
-    keep = brdf.measured[ih, jd, kp]
-    ih, jd, kp = ih[keep], jd[keep], kp[keep]
-    return _samples(ih, jd, kp, brdf.table[ih, jd, kp].astype(np.float64), brdf.name)
-
-
-def samples_from_function(brdf, subset=None, name=None) -> Samples:
-    """Samples of ``brdf(theta_h, theta_d, phi_d) -> (N, 3)`` at the grid cells
-    (identical to tabulating it on the MERL grid and reading those cells)."""
-    ih, jd, kp = grid_subset() if subset is None else subset
-    th, td, pd = grid_angles()
-    values = np.asarray(brdf(th[ih], td[jd], pd[kp]), dtype=np.float64)
-    return _samples(ih, jd, kp, values, name)
-
-
-def _samples(ih, jd, kp, values, name) -> Samples:
-    th, td, pd = grid_angles()
-    wi, _ = from_half_diff(th[ih], td[jd], pd[kp])
-    if not np.all(np.isfinite(values)):
-        raise ValueError("measured values of %s are not finite" % (name or "material"))
-    return Samples(th[ih], td[jd], pd[kp], np.asarray(wi[2]), np.maximum(values, 0.0), name)
 
 
 # --- the least-squares problem -----------------------------------------------------
@@ -156,28 +99,13 @@ class _Problem:
         # d rho_l / d ctrl[r, curve, j] = C[r, l] dL_r/d(curve) B_j
         F = np.stack([dL_da, dL_dg], axis=2)                                # (N, R, 2, 6)
         J_ctrl = np.empty((N, 3, R * 2 * N_CONTROL))
-        # softmax: d C[r, l] / d z[r, k] = C[r, l] (delta_lk - C[r, k]), k < 2
-        dC = C[:, :, None] * (np.eye(3)[None, :, :2] - C[:, None, :2])      # (R, 3, 2)
+        dC = softmax_jacobian(C)                                            # (R, 3, 2)
         J_z = np.empty((N, 3, R * 2))
         for l in range(3):
             coef = w[:, l:l + 1] * C[None, :, l]                            # (N, R)
             J_ctrl[:, l] = (coef[:, :, None, None] * F).reshape(N, -1)
             J_z[:, l] = ((w[:, l:l + 1] * L)[:, :, None] * dC[None, :, l, :]).reshape(N, -1)
         return res.reshape(-1), J_ctrl.reshape(3 * N, -1), J_z.reshape(3 * N, -1)
-
-
-def softmax_chroma(logits) -> np.ndarray:
-    """(R, 3) chromaticities from (R, 2) free variables: softmax of (z0, z1, 0)."""
-    z = np.concatenate([np.asarray(logits, dtype=np.float64).reshape(-1, 2), np.zeros((len(logits), 1))], axis=1)
-    z = z - z.max(axis=1, keepdims=True)
-    e = np.exp(z)
-    return e / e.sum(axis=1, keepdims=True)
-
-
-def chroma_logits(chromaticity, floor=1e-6) -> np.ndarray:
-    """Inverse of :func:`softmax_chroma` (chromaticities floored at ``floor``)."""
-    c = np.maximum(np.asarray(chromaticity, dtype=np.float64), floor)
-    return np.log(c[:, :2]) - np.log(c[:, 2:3])
 
 
 def _second_differences(n_curves):
@@ -194,49 +122,6 @@ class Fit:
     iterations: int
     at_bounds: list       # lobes whose curves touch a bound ("lobe 2 gamma max", ...)
     variables: np.ndarray  # psi of a basis fit; (R, 2, 6) control values of a full fit
-
-
-def levenberg_marquardt(fun, x0, lower=None, upper=None, max_iter=100, tol=1e-6):
-    """Minimise 1/2 |r(x)|^2 by Levenberg-Marquardt with box bounds (projected steps).
-
-    ``fun(x) -> (r, J)``. The normal equations are P x P (P <= 42 here), so a
-    step costs one Jacobian and a tiny solve instead of an SVD of the whole
-    (3N x P) Jacobian. Stops when a step lowers the cost by less than ``tol``
-    relative, or after ``max_iter`` Jacobians. Returns (x, cost, iterations).
-    """
-    lo = np.full_like(x0, -np.inf) if lower is None else lower
-    hi = np.full_like(x0, np.inf) if upper is None else upper
-    x = np.clip(np.asarray(x0, dtype=np.float64), lo, hi)
-    r, J = fun(x, True)
-    cost = 0.5 * float(r @ r)
-    lam = 1e-3
-    for it in range(1, max_iter + 1):
-        g = J.T @ r
-        H = J.T @ J
-        d = np.diag(H).copy() + 1e-12
-        improved = False
-        for _ in range(12):
-            try:
-                step = -np.linalg.solve(H + lam * np.diag(d), g)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            x_new = np.clip(x + step, lo, hi)
-            r_new, _ = fun(x_new, False)
-            cost_new = 0.5 * float(r_new @ r_new)
-            if np.isfinite(cost_new) and cost_new < cost:
-                improved = True
-                break
-            lam *= 8.0
-        if not improved:
-            return x, cost, it
-        gain = (cost - cost_new) / max(cost, 1e-300)
-        x, cost = x_new, cost_new
-        lam = max(lam / 5.0, 1e-9)
-        if gain < tol:
-            return x, cost, it
-        r, J = fun(x, True)
-    return x, cost, max_iter
 
 
 def _solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_iter=100):
@@ -270,9 +155,21 @@ def _solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_it
     zb = np.full(2 * R, 30.0)
     lo = np.concatenate([np.full(P, -np.inf) if lower is None else lower, -zb])
     hi = np.concatenate([np.full(P, np.inf) if upper is None else upper, zb])
-    x, cost, iters = levenberg_marquardt(fun, x0, lo, hi, max_iter=max_iter)
-    ctrl, z = unpack(x)
-    return ctrl, softmax_chroma(z), x, cost, iters
+    res = levenberg_marquardt(lambda x: _normal_equations(fun(x, True)), lambda x: 0.5 * _sq(fun(x, False)[0]),
+                              np.clip(x0, lo, hi), propose=lambda x, step: np.clip(x + step, lo, hi),
+                              max_iter=max_iter)
+    ctrl, z = unpack(res.x)
+    return ctrl, softmax_chroma(z), res.x, res.cost, res.iterations
+
+
+def _normal_equations(rJ):
+    """(g, H) = (J^T r, J^T J): gradient and Gauss-Newton Hessian of |r|^2 / 2."""
+    r, J = rJ
+    return J.T @ r, J.T @ J
+
+
+def _sq(r) -> float:
+    return float(r @ r)
 
 
 def _control_bounds(n):

@@ -13,6 +13,7 @@ import numpy as np
 from mi_dsbrdf.brdf.curves import N_CONTROL
 from mi_dsbrdf.brdf.dsbrdf import MAX_LOBES, Material
 from mi_dsbrdf.errors import MaterialError
+from mi_dsbrdf.model import model_file as model_data
 
 
 def default_material() -> Material:
@@ -22,7 +23,6 @@ def default_material() -> Material:
     coefficients zero); without one, a neutral two-lobe grey material (a broad,
     nearly Lambertian lobe and a glossy one).
     """
-    from mi_dsbrdf.model import model_file as model_data
     model = model_data.shipped_model()
     if model is not None:
         return model.mean_material()
@@ -33,7 +33,6 @@ def default_material() -> Material:
 
 def library_names() -> list:
     """Names of the materials in the shipped library (sorted)."""
-    from mi_dsbrdf.model import model_file as model_data
     model = model_data.shipped_model()
     return sorted(model.library) if model is not None else []
 
@@ -43,7 +42,6 @@ def load_material(path_or_name) -> Material:
     s = os.fspath(path_or_name)
     if os.path.exists(s) or s.endswith(".json") or os.sep in s:
         return Material.load(s)
-    from mi_dsbrdf.model import model_file as model_data
     model = model_data.shipped_model()
     if model is None or s not in model.library:
         names = library_names()
@@ -94,7 +92,6 @@ def material_from_params(params: dict):
     if "material" in p:
         return load_material(p["material"]), None
     if "psi" in p:
-        from mi_dsbrdf.model import model_file as model_data
         model = model_data.load_model(p["model"]) if "model" in p else model_data.shipped_model()
         if model is None:
             raise MaterialError("psi was given but no reflectance model is installed; pass model=<file>")

@@ -1,6 +1,5 @@
-"""Priors of the posterior (paper §4), as negative log densities with gradients.
+"""Reflectance priors (paper §4), as negative log densities with gradients, and their learning.
 
-Reflectance
   * :class:`GaussianMixture` — Eq. 6, a Gaussian mixture on the basis
     coefficients psi, fitted by EM (:func:`fit_gmm`), the number of components
     and covariance type chosen by BIC (:func:`select_gmm`).
@@ -10,6 +9,7 @@ Reflectance
 
 All functions take float64 numpy arrays and return float64; ``nll`` methods
 return -log p up to the constants stated, ``grad`` methods its gradient.
+The illumination priors are in :mod:`mi_dsbrdf.inference.illumination_priors`.
 """
 from __future__ import annotations
 
@@ -65,6 +65,12 @@ class GaussianMixture:
         diff = x[:, None, :] - self.means[None]                              # (M, C, k)
         sol = np.einsum("cij,mcj->mci", self._prec, diff)
         return self._log_norm[None] - 0.5 * np.einsum("mci,mci->mc", diff, sol), sol
+
+    def dominant_precision(self, psi) -> np.ndarray:
+        """(k, k) inverse covariance of the component most responsible for ``psi``:
+        the Gauss-Newton Hessian of -log p near psi (the reflectance block adds it)."""
+        lc, _ = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1))
+        return self._prec[int(np.argmax(lc[0]))]
 
     def log_density(self, x) -> np.ndarray:
         """log p(psi) for psi of shape (k,) (returns a float) or (M, k) (returns (M,))."""
@@ -231,106 +237,3 @@ def fit_hue_concentration(chromaticities, min_saturation=0.02) -> tuple:
     rbar = min(rbar, 1 - 1e-9)
     kappa = brentq(lambda k: i1e(k) / i0e(k) - rbar, 1e-9, 1e9)
     return float(kappa), len(cos)
-
-
-# --- illumination priors (Eq. 13-16) ----------------------------------------------------
-# Both act on the log radiance x = log L of an (H, W, C) lat-long map (the
-# illumination is optimised in log, which keeps it positive), weight texels by
-# their solid angle, and return (value, gradient with respect to x).
-
-def _texel_weights(height, width):
-    """(H, W) solid angles normalised to sum to one."""
-    from mi_dsbrdf.inference.latlong import texel_solid_angles
-    w = texel_solid_angles(height, width)
-    return w / w.sum()
-
-
-class EntropyPrior:
-    """Eq. 13-15: -log p(L) = weight * H(L), the entropy of the distribution of
-    log luminance over the sphere, estimated by a kernel density (KDE) histogram.
-
-    Natural illumination is dominated by few, bright sources; its log-radiance
-    histogram is peaked (low entropy), while the blur that trades off against a
-    glossy BRDF spreads it. With samples x_i (mean log channel of texel i,
-    weight w_i = solid-angle fraction) and K bin centres b_k:
-
-        h_k = sum_i w_i K((x_i - b_k) / sigma),   p_k = h_k / sum_k h_k,
-        H = -sum_k p_k log p_k,
-
-    K Gaussian, sigma = ``bandwidth_bins`` bin spacings.
-
-    The bins are constants of the function: :meth:`bins_for` spans a map's
-    range (inference fixes them at the start of each illumination block), and
-    the entropy is then a smooth function of the map with an exact gradient.
-    """
-
-    def __init__(self, weight=1.0, n_bins=64, bandwidth_bins=1.5):
-        self.weight = float(weight)
-        self.n_bins = int(n_bins)
-        self.bandwidth_bins = float(bandwidth_bins)
-
-    def bins_for(self, log_map):
-        """(centres (K,), sigma) spanning the log luminance of ``log_map`` with a 3-sigma margin."""
-        xl = np.asarray(log_map, dtype=np.float64).mean(axis=2)
-        lo, hi = float(xl.min()), float(xl.max())
-        span = max(hi - lo, 1e-3)
-        sigma = span / self.n_bins * self.bandwidth_bins
-        return np.linspace(lo - 3 * sigma, hi + 3 * sigma, self.n_bins), sigma
-
-    def __call__(self, log_map, bins=None):
-        """(weight * H, gradient (H, W, C)) of an (H, W, C) log map; ``bins``
-        from :meth:`bins_for` (default: those of this map)."""
-        x = np.asarray(log_map, dtype=np.float64)
-        H_, W_, C = x.shape
-        lum_w = np.full(C, 1.0 / C)
-        centres, sigma = self.bins_for(x) if bins is None else bins
-        w = _texel_weights(H_, W_).reshape(-1)
-        s = (x @ lum_w).reshape(-1)                                 # mean log channel
-        z = (s[:, None] - centres[None]) / sigma                  # (N, K)
-        k = np.exp(-0.5 * z * z)
-        h = w @ k + 1e-300
-        tot = h.sum()
-        p = h / tot
-        ent = float(-(p * np.log(p)).sum())
-        # dH/dh_k = -(log p_k + 1)/tot + sum_j p_j (log p_j + 1)/tot
-        dH_dp = -(np.log(p) + 1.0)
-        dH_dh = (dH_dp - (p * dH_dp).sum()) / tot
-        dh_ds = w[:, None] * k * (-z / sigma)                     # (N, K)
-        g = (dh_ds @ dH_dh).reshape(H_, W_)
-        return self.weight * ent, self.weight * g[..., None] * lum_w[None, None, :]
-
-
-class GradientPrior:
-    """Eq. 16: a hyper-Laplacian prior on the colour gradients of the log map,
-
-        -log p(L) = weight * sum_i w_i (|grad x|_i^2 + eps^2)^(alpha / 2),
-
-    alpha < 1 (heavy-tailed: sharp edges such as the sun's rim cost little,
-    noise a lot). Lat-long aware: phi differences wrap around, are divided by
-    sin theta (the angular distance between neighbouring texels of a row) and
-    all differences are in units of the polar texel spacing; texels weigh by
-    solid angle. eps keeps the gradient finite at the kink |grad x| = 0.
-    """
-
-    def __init__(self, weight=1.0, alpha=0.5, eps=1e-2):
-        if not 0 < alpha < 1:
-            raise ValueError("the hyper-Laplacian exponent alpha must be in (0, 1), got %r" % alpha)
-        self.weight, self.alpha, self.eps = float(weight), float(alpha), float(eps)
-
-    def __call__(self, log_map):
-        x = np.asarray(log_map, dtype=np.float64)
-        H_, W_, C = x.shape
-        theta = (np.arange(H_) + 0.5) / H_ * np.pi
-        inv_s = (1.0 / (np.sin(theta) * (2 * np.pi / W_) / (np.pi / H_)))[:, None, None]
-        dphi = (np.roll(x, -1, axis=1) - x) * inv_s               # wraps in phi
-        dth = np.zeros_like(x)
-        dth[:-1] = x[1:] - x[:-1]                                  # no neighbour past the poles
-        m2 = (dphi ** 2 + dth ** 2).sum(axis=2) + self.eps ** 2    # (H, W)
-        w = _texel_weights(H_, W_)
-        val = float((w * m2 ** (self.alpha / 2)).sum())
-        c = (w * self.alpha * m2 ** (self.alpha / 2 - 1))[..., None]   # d val / d (m2) * 2 / 2
-        gphi = c * dphi * inv_s
-        gth = c * dth
-        g = -gphi + np.roll(gphi, 1, axis=1) - gth
-        g[1:] += gth[:-1]
-        return self.weight * val, self.weight * g

@@ -1,0 +1,97 @@
+"""The settings of inference: one frozen, validated :class:`Config`.
+
+Its defaults are the benchmarked setting (``benchmarks/inference_cases.py``,
+the experiments, the CLI): a 32x64 illumination map, 3 rounds of alternating
+blocks per pass, 15 Levenberg-Marquardt iterations per reflectance block.
+:data:`PRESETS` names the settings the package runs under; a variation is
+``dataclasses.replace(config, map_size=(16, 32))`` (validated again).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from mi_dsbrdf.errors import ConfigError
+
+#: observed pixels at which the prior weights of :class:`Config` apply as given (a
+#: 64-pixel sphere covers 3000, the renders they were tuned on): the likelihood sums
+#: over pixels, so the weights are scaled by (observed pixels / PRIOR_PIXELS) to keep
+#: the balance of likelihood and priors the same at any image resolution
+PRIOR_PIXELS = 3000
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    """Settings of :func:`mi_dsbrdf.inference.recover_envmap` and
+    :func:`mi_dsbrdf.inference.recover_light`.
+
+    map_size : (H, W) texels of the lat-long illumination map (H >= 2, W >= 4)
+    max_rounds : rounds of the two blocks per pass (>= 1)
+    tol : relative change of the negative log posterior that ends a pass
+    seed : seed of the random start of the chromaticities
+    block_iters : Levenberg-Marquardt iterations per reflectance block
+    illumination_iters : L-BFGS iterations per illumination block (each one
+        product with the transport: cheap)
+    likelihood_scale : Laplacian scale b of Eq. 19 in log units (the expected
+        |log error| of a pixel)
+    w_gmm, w_hue, w_entropy, w_gradient : prior weights (lambda of Eq. 18) at
+        PRIOR_PIXELS observed pixels, chosen on held-out materials and a held-out
+        probe by ``benchmarks/tune_priors.py`` (``benchmarks/results/prior_weights.json``):
+        the GMM prior strong (it resolves the split of gloss between material and
+        light), the others at 1 (a strong hue prior traps the chromaticity from its
+        random start)
+    reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
+        step: it fits 16 variables, so an evenly spread subset of the pixels does
+        (the Jacobian's cost is proportional to pixels x texels)
+    """
+    map_size: tuple = (32, 64)
+    max_rounds: int = 3
+    tol: float = 1e-3
+    seed: int = 0
+    block_iters: int = 15
+    illumination_iters: int = 60
+    likelihood_scale: float = 0.05
+    w_gmm: float = 300.0
+    w_hue: float = 1.0
+    w_entropy: float = 1.0
+    w_gradient: float = 1.0
+    reflectance_pairs: int = 500_000
+
+    def __post_init__(self):
+        try:
+            h, w = (int(v) for v in self.map_size)
+        except (TypeError, ValueError):
+            raise ConfigError("map_size must be (H, W), got %r" % (self.map_size,)) from None
+        if h < 2 or w < 4:
+            raise ConfigError("map_size %dx%d is too small (at least 2x4)" % (h, w))
+        object.__setattr__(self, "map_size", (h, w))
+        for name, low in (("max_rounds", 1), ("block_iters", 1), ("illumination_iters", 1),
+                          ("reflectance_pairs", 64)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
+        for name in ("tol", "likelihood_scale"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ConfigError("%s must be a finite number > 0, got %r" % (name, value))
+        for name in ("w_gmm", "w_hue", "w_entropy", "w_gradient"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ConfigError("%s must be a finite number >= 0, got %r" % (name, value))
+
+    def prior_weights(self, observed_pixels) -> dict:
+        """The weights {"gmm", "hue", "entropy", "gradient"} scaled to
+        ``observed_pixels`` (see :data:`PRIOR_PIXELS`)."""
+        n = observed_pixels / PRIOR_PIXELS
+        return {t: n * getattr(self, "w_" + t) for t in ("gmm", "hue", "entropy", "gradient")}
+
+
+#: No prior at all (likelihood only): the experiments' ablation.
+NO_PRIORS = dict(w_gmm=0.0, w_hue=0.0, w_entropy=0.0, w_gradient=0.0)
+
+#: The named settings: ``benchmarked`` (CLI, experiments, benchmarks) and ``demo``
+#: (the main job: the benchmarked setting on a 16x32 map, a few minutes on 2 cores).
+PRESETS = {
+    "benchmarked": Config(),
+    "demo": Config(map_size=(16, 32)),
+}

@@ -1,0 +1,175 @@
+"""Joint MAP estimate of reflectance and a point or directional light (paper §5).
+
+The light is a direction (unit vector from the object towards the light) and a
+non-negative intensity, equal in RGB (the colour is the material's): irradiance
+for a directional light; for a point light, which sits at a distance taken from
+the scene, the radiant intensity in W/sr. A wrong reflectance biases the light
+and the other way round, so the search starts globally (:func:`recover_light`):
+the best few of 64 directions under the mean material, and the directions the
+brightest pixel suggests, each get a short reflectance fit and a coarse Powell
+refinement; the best posterior starts the alternation of Powell's method on the
+light (:func:`light_block`) and the reflectance block with the light refined
+jointly.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.optimize import minimize
+
+from mi_dsbrdf.brdf.chromaticity import softmax_chroma
+from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.config import Config
+from mi_dsbrdf.errors import InputError
+from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.inference.objective import Posterior, angles_from_direction, direction_from_angles
+from mi_dsbrdf.inference.reflectance import random_chroma_logits, reflectance_block, reflectance_starts
+from mi_dsbrdf.inference.result import Recovery
+
+#: directions of the global search (Fibonacci lattice) and how many of them go on
+SEARCH_DIRECTIONS, SEARCH_KEEP = 64, 6
+#: the search's reflectance fits run this fraction of a block's iterations (at least 5)
+SEARCH_FRACTION = 0.25
+#: function evaluations of the search's coarse Powell refinement, and of a light block
+SEARCH_POWELL_EVALS, POWELL_EVALS = 100, 400
+
+
+def light_likelihood(post, theta, phi, log_intensity) -> float:
+    """Eq. 19 of the image under a light from (theta, phi) of this log intensity."""
+    post.aim(theta, phi)
+    return post.likelihood(post.ts.render(np.full((1, 3), np.exp(log_intensity))))
+
+
+def light_block(post, theta, phi, log_intensity, maxfev=POWELL_EVALS) -> tuple:
+    """Powell's method on (theta, phi, log intensity) with the reflectance fixed."""
+    res = minimize(lambda v: light_likelihood(post, *v), [theta, phi, log_intensity], method="Powell",
+                   options={"xtol": 1e-4, "ftol": 1e-7, "maxfev": maxfev})
+    return tuple(res.x)
+
+
+def candidate_lights(post, n=SEARCH_DIRECTIONS, keep=SEARCH_KEEP) -> list:
+    """The ``keep`` best of ``n`` directions spread over the sphere (Fibonacci
+    lattice), each with the intensity that matches the image's median level under
+    the current reflectance: [(likelihood, theta, phi, log intensity), ...]."""
+    found = []
+    i = np.arange(n) + 0.5
+    thetas, phis = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
+    for th, ph in zip(thetas, phis):
+        log_i = matched_log_intensity(post, th, ph)
+        if log_i is None:
+            continue
+        found.append((light_likelihood(post, th, ph, log_i), th, ph % (2 * np.pi), log_i))
+    if not found:
+        raise InputError("no light direction lights the observed pixels")
+    return sorted(found)[:keep]
+
+
+def matched_log_intensity(post, theta, phi):
+    """Log intensity that matches the median observed level of the pixels a light
+    from (theta, phi) reaches under the current reflectance; None if it reaches none."""
+    post.aim(theta, phi)
+    lit = post.ts.render(np.ones((1, 3))).mean(axis=1)[post.keep]
+    if not np.any(lit > 0):
+        return None
+    ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
+    return float(np.log(ratio)) if ratio > 0 else None
+
+
+def highlight_lights(post) -> list:
+    """Directions the brightest observed pixel suggests: its normal (the light of a
+    matte object) and the mirror of the view direction about it (the light of a
+    glossy one), as [(theta, phi), ...]."""
+    lum = np.where(post.keep, post.observed.mean(axis=1), -np.inf)
+    i = int(np.argmax(lum))
+    si = post.ts.si
+    n = np.array(si.n)[:, i].astype(np.float64)
+    v = np.array(si.to_world(si.wi))[:, i].astype(np.float64)
+    mirror = 2 * (n @ v) * n - v
+    return [angles_from_direction(n), angles_from_direction(mirror)]
+
+
+def recover_light(texels: TexelSum, observed, mask, model, config: Config = None, progress=None,
+                  known_light=None, point=None) -> Recovery:
+    """MAP estimate of the material and a directional or point light.
+
+    Parameters
+    ----------
+    texels : the view (its BSDF is not used: the posterior brings its own)
+    observed : (H, W, 3) float radiance; mask : (H, W) bool usable pixels
+    model : :class:`~mi_dsbrdf.model.model_file.ReflectanceModel`
+    config : :class:`~mi_dsbrdf.config.Config` (default: the benchmarked setting)
+    progress : called with each logged row
+    known_light : (direction (3,), intensity): skip the light search and block
+    point : (centre (3,), distance) of a point light: it sits at ``distance``
+        from ``centre`` in the recovered direction; None: a directional light
+    """
+    cfg = config or Config()
+    post = Posterior(texels, observed, mask, model, cfg, point=point)
+    logits = random_chroma_logits(cfg, post.R)
+    psi = np.zeros(post.k)
+    t0 = time.perf_counter()
+    rows = []
+
+    def log(row):
+        rows.append(dict(row, seconds=time.perf_counter() - t0))
+        if progress:
+            progress(rows[-1])
+
+    if known_light is None:
+        post.set_reflectance(psi, logits)
+        best = None
+        cands = [c[1:] for c in candidate_lights(post)]
+        for th, ph in highlight_lights(post):
+            li = matched_log_intensity(post, th, ph)
+            if li is not None:
+                cands.append((th, ph, li))
+        for th, ph, li in cands:
+            post.aim(th, ph)
+            step = reflectance_block(post, psi, logits, np.full((1, 3), np.exp(li)),
+                                     max(int(cfg.block_iters * SEARCH_FRACTION), 5), fit_scale=True)
+            li = float(np.log(step.L[0, 0]))
+            post.set_reflectance(step.psi, step.logits)
+            th, ph, li = light_block(post, th, ph, li, maxfev=SEARCH_POWELL_EVALS)     # coarse: refined later
+            post.aim(th, ph)
+            value = post.reflectance_terms(step.psi, step.logits, np.full((1, 3), np.exp(li)))[0]
+            log({"pass": "light search", "round": len(rows), "neg_log_posterior": value})
+            if best is None or value < best[0]:
+                best = (value, step.psi, step.logits, th, ph, li)
+        _, psi, logits, theta, phi, log_i = best
+    else:
+        theta, phi = angles_from_direction(known_light[0])
+        log_i = float(np.log(known_light[1]))
+    prev = None
+    for rnd in range(cfg.max_rounds):
+        post.set_reflectance(psi, logits)
+        if known_light is None:
+            theta, phi, log_i = light_block(post, theta, phi, log_i)
+        L = np.full((1, 3), np.exp(log_i))
+        post.aim(theta, phi)
+        if rnd == 0:
+            # the reflectance block from every start (psi found so far, the mean, GMM means)
+            steps = [reflectance_block(post, p0, logits, L, cfg.block_iters, fit_scale=known_light is None)
+                     for p0 in [psi] + reflectance_starts(model)]
+            step = min(steps, key=lambda s: post.reflectance_terms(s.psi, s.logits, s.L)[0])
+        elif known_light is None:
+            step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True, direction=(theta, phi))
+            theta, phi = step.direction
+        else:
+            step = reflectance_block(post, psi, logits, L, cfg.block_iters)
+        psi, logits, L = step.psi, step.logits, step.L
+        log_i = float(np.log(L[0, 0]))
+        total, lik = post.reflectance_terms(psi, logits, L)
+        log({"pass": "light", "round": rnd, "neg_log_posterior": total, "likelihood": lik,
+             **post.prior_terms(psi, logits)})
+        if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
+            break
+        prev = total
+    direction = direction_from_angles(theta, phi)
+    light = {"type": "directional" if point is None else "point", "direction": direction,
+             "intensity": float(np.exp(log_i))}
+    if point is not None:
+        light["position"] = np.asarray(point[0]) + point[1] * direction
+    chroma = softmax_chroma(logits)
+    return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
+                    chromaticity=chroma, light=light, log=rows)

@@ -1,0 +1,185 @@
+"""The negative log posterior of paper §4 (Eq. 18) for one scene and image.
+
+    -log p(psi, c, L | I) = likelihood (Eq. 19)
+                            + reflectance priors: GMM (Eq. 6), hue (Eq. 12), curve penalty
+                            + illumination priors: entropy (Eq. 13-15), gradient (Eq. 16)
+
+:class:`Posterior` evaluates it term by term, each weighted by the
+:class:`~mi_dsbrdf.config.Config` weights scaled to the observed pixel count.
+It owns a ``dsbrdf`` BSDF with the model's basis (``psi`` and ``chromaticity``
+differentiable) and its own copies of the caller's
+:class:`~mi_dsbrdf.inference.forward.TexelSum`: it changes nothing it is given.
+The blocks that minimise it are :mod:`~mi_dsbrdf.inference.envmap` (the
+illumination map), :mod:`~mi_dsbrdf.inference.light` (a point or directional
+light) and :mod:`~mi_dsbrdf.inference.reflectance` (psi and chromaticity).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import mitsuba as mi
+import numpy as np
+
+from mi_dsbrdf.brdf.chromaticity import softmax_chroma
+from mi_dsbrdf.config import Config
+from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint
+from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior
+from mi_dsbrdf.inference.likelihood import LOG_OFFSET, log_likelihood_terms
+
+#: how far (natural log) a recovered kappa/gamma control value may leave the range the
+#: library's materials span at that control point before CURVE_PENALTY applies
+CURVE_MARGIN = 1.0
+#: weight of the squared excess (log units) of a control value beyond that range
+CURVE_PENALTY = 100.0
+#: the fewest pixels the reflectance block works on, however large the map
+MIN_REFLECTANCE_PIXELS = 64
+
+
+@dataclasses.dataclass(frozen=True)
+class PixelView:
+    """Pixels a block works on: their TexelSum, observed values (P, 3), usable
+    flags (P,) and the factor that makes their likelihood stand for all usable pixels."""
+    ts: TexelSum
+    observed: np.ndarray
+    keep: np.ndarray
+    weight: float
+
+
+def direction_from_angles(theta, phi) -> np.ndarray:
+    """World direction (y up, the lat-long convention of :mod:`mi_dsbrdf.inference.latlong`)."""
+    st = np.sin(theta)
+    return np.array([st * np.sin(phi), np.cos(theta), -st * np.cos(phi)])
+
+
+def angles_from_direction(d) -> tuple:
+    """(theta, phi) of a world direction, the inverse of :func:`direction_from_angles`."""
+    d = np.asarray(d, dtype=np.float64) / np.linalg.norm(d)
+    return float(np.arccos(np.clip(d[1], -1, 1))), float(np.arctan2(d[0], -d[2]))
+
+
+class Posterior:
+    """-log p(psi, c, L | I) for one view of one object and its observed image.
+
+    Parameters
+    ----------
+    texels : the view (:class:`~mi_dsbrdf.inference.forward.TexelSum`) at the map's resolution
+    observed : (H, W, >=3) float image (radiance)
+    mask : (H, W) bool, the pixels the likelihood uses
+    model : :class:`~mi_dsbrdf.model.model_file.ReflectanceModel`
+    config : :class:`~mi_dsbrdf.config.Config`
+    point : (centre, distance) of a point light (kept fixed), None for a
+        directional light or a map
+    """
+
+    def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None):
+        self.model, self.cfg, self.point = model, config, point
+        obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
+        keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
+        self.observed, self.keep = obs, keep
+        self.offset = LOG_OFFSET * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
+        self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
+        self.k, self.R = model.basis.n_bases, model.basis.n_lobes
+        self.bsdf = mi.load_dict({"type": "dsbrdf", "model": model.source, "psi": " ".join(["0"] * self.k)})
+        self.params = mi.traverse(self.bsdf)
+        self.ts = texels.with_bsdf(self.bsdf)
+        # the reflectance block's pixels: an evenly spread subset, its likelihood
+        # scaled up to stand for all usable pixels
+        usable = np.nonzero(keep)[0]
+        n_sub = max(MIN_REFLECTANCE_PIXELS, config.reflectance_pairs // max(texels.n_texels, 1))
+        if usable.size > n_sub:
+            rows = usable[np.linspace(0, usable.size - 1, n_sub).round().astype(np.int64)]
+            self.refl = PixelView(self.ts.subset(rows), obs[rows], np.ones(rows.size, bool), usable.size / rows.size)
+        else:
+            self.refl = PixelView(self.ts, obs, keep, 1.0)
+        # the range of the library's kappa/gamma control values: a recovered curve
+        # stays within CURVE_MARGIN of it (one image sees few theta_d; without this
+        # box the unobserved, grazing end of a curve can run off to kappa = e^85)
+        ctrl = np.stack([model.basis.control_values(model.library_material(n).psi) for n in model.library])
+        self.curve_range = (ctrl.min(axis=0).reshape(-1) - CURVE_MARGIN, ctrl.max(axis=0).reshape(-1) + CURVE_MARGIN)
+        c0 = model.basis.control_values(np.zeros(self.k)).reshape(-1)      # control values are linear in psi
+        self.curve_map = (c0, np.stack([model.basis.control_values(e).reshape(-1) - c0 for e in np.eye(self.k)],
+                                       axis=1))
+        self.w = config.prior_weights(int(keep.sum()))
+        self.entropy = EntropyPrior(self.w["entropy"])
+        self.gradient = GradientPrior(self.w["gradient"])
+
+    def aim(self, theta, phi) -> None:
+        """Light the pixels from the direction (theta, phi) (seen from the object):
+        a directional light, or the point light at ``distance`` from ``centre``
+        that way (its intensity then stands for W/sr, not irradiance)."""
+        d = direction_from_angles(theta, phi)
+        whole = self.refl.ts is self.ts
+
+        def lit(ts):
+            if self.point is None:
+                return ts.with_directions(d[None], [1.0])
+            return ts.with_point(np.asarray(self.point[0]) + self.point[1] * d)
+        self.ts = lit(self.ts)
+        self.refl = dataclasses.replace(self.refl, ts=self.ts if whole else lit(self.refl.ts))
+
+    # --- reflectance -------------------------------------------------------------
+    def set_reflectance(self, psi, logits) -> None:
+        """Put psi (k,) and the chromaticity variables (R, 2) into the BSDF."""
+        self.params["psi"] = mi.Float(np.asarray(psi, dtype=np.float32))
+        self.params["chromaticity"] = mi.Float(softmax_chroma(logits).reshape(-1).astype(np.float32))
+        self.params.update()
+
+    def prior_terms(self, psi, logits, log_map=None, bins=None) -> dict:
+        """The weighted prior terms one by one, for the log: the curve penalty, GMM
+        (Eq. 6), hue (Eq. 12) and, given a map, entropy (Eq. 13-15) and gradient (Eq. 16)."""
+        terms = {"curve_penalty": self.curve_penalty(psi)[0]}
+        if self.model.gmm is not None:
+            terms["gmm"] = self.w["gmm"] * self.model.gmm.nll(psi)
+        if self.model.hue_prior is not None:
+            terms["hue"] = self.w["hue"] * self.model.hue_prior.nll(softmax_chroma(logits))
+        if log_map is not None:
+            terms["entropy"] = self.entropy(log_map, bins)[0]
+            terms["gradient"] = self.gradient(log_map)[0]
+        return {k: float(v) for k, v in terms.items()}
+
+    def curve_penalty(self, psi) -> tuple:
+        """(value, gradient, Gauss-Newton Hessian) of CURVE_PENALTY * sum of the squared
+        excess of the kappa/gamma control values beyond ``curve_range``: ψ far from
+        the data can put a curve's unobserved (grazing) end at kappa = e^85."""
+        c0, A = self.curve_map
+        c = c0 + A @ psi
+        excess = np.maximum(c - self.curve_range[1], 0) - np.maximum(self.curve_range[0] - c, 0)
+        active = (excess != 0).astype(np.float64)
+        return (CURVE_PENALTY * float(excess @ excess), 2 * CURVE_PENALTY * A.T @ excess,
+                2 * CURVE_PENALTY * (A.T * active) @ A)
+
+    def reflectance_terms(self, psi, logits, L) -> tuple:
+        """(value, likelihood) of likelihood + GMM + hue priors + curve penalty at
+        fixed L, the likelihood over the reflectance block's pixels (``self.refl``),
+        no gradients (the block takes its derivatives from
+        :meth:`~mi_dsbrdf.inference.forward.TexelSum.reflectance_jacobian`)."""
+        self.set_reflectance(psi, logits)
+        v = self.refl
+        lik = self.likelihood(v.ts.render(L), v.observed, v.keep) * v.weight
+        return lik + sum(self.prior_terms(psi, logits).values()), lik
+
+    def likelihood(self, image, observed=None, keep=None) -> float:
+        """Eq. 19 of the pixel radiance ``image`` (P, 3) against ``observed``
+        (default: all this view's pixels)."""
+        observed = self.observed if observed is None else observed
+        keep = self.keep if keep is None else keep
+        return log_likelihood_terms(image[:, None, :], observed[:, None, :], keep[:, None], self.offset,
+                                    self.scale)[0]
+
+    # --- illumination ------------------------------------------------------------
+    def map_likelihood(self, log_map, T, seen, grad=True) -> tuple:
+        """(value, d/d log_map or None) of the likelihood (Eq. 19) of the map at fixed reflectance."""
+        L = np.where(seen[..., None], np.exp(log_map), 0.0)
+        image = apply_transport(T, L)
+        lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
+                                          self.offset, self.scale)
+        if not grad:
+            return lik, None
+        return lik, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * L
+
+    def illumination_terms(self, log_map, T, seen, bins) -> tuple:
+        """(value, d/d log_map, likelihood) of likelihood + entropy + gradient priors at fixed reflectance."""
+        lik, g = self.map_likelihood(log_map, T, seen)
+        e, ge = self.entropy(log_map, bins)
+        s, gs = self.gradient(log_map)
+        return lik + e + s, g + ge + gs, lik

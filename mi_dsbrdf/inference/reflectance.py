@@ -1,0 +1,157 @@
+"""The reflectance block: psi and chromaticity with the light fixed (paper §5).
+
+Levenberg-Marquardt (:func:`mi_dsbrdf.lm.levenberg_marquardt`) with iteratively
+reweighted residuals (IRLS): the Laplacian likelihood sum rho(d_i)/b is
+minimised as a sequence of weighted least-squares problems, weights
+w_i = rho'(d_i)/(d_i b), with the image Jacobian by forward-mode AD through the
+``dsbrdf`` plugin (:meth:`~mi_dsbrdf.inference.forward.TexelSum.reflectance_jacobian`).
+The GMM prior enters as the quadratic of its most responsible component, the
+hue prior through its gradient, the curve penalty exactly. A step is kept only
+if the full negative log posterior falls.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import drjit as dr
+import numpy as np
+
+from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
+from mi_dsbrdf.config import Config
+from mi_dsbrdf.inference.likelihood import KINK
+from mi_dsbrdf.lm import Damping, levenberg_marquardt
+
+#: bound of the chromaticity variables (softmax logits): c >= ~e^-6 / 2
+CHROMA_LIMIT = 6.0
+#: largest change of the light's log scale in one step
+MAX_SCALE_STEP = 5.0
+#: step of the central differences of the image by the light's direction (radians)
+DIRECTION_STEP = 1e-3
+#: damping of the block's steps: start strongly damped (far starts overshoot)
+DAMPING = Damping(initial=1.0, increase=10.0, decrease=10.0, tries=10, minimum=1e-9, floor=1e-9)
+#: concentration of the Dirichlet the chromaticities start from (5: mostly greyish)
+START_CHROMA_CONCENTRATION = 5.0
+
+
+@dataclasses.dataclass(frozen=True)
+class ReflectanceStep:
+    """What a reflectance block returns: psi (k,), chromaticity variables (R, 2),
+    the light L (T, 3) times the fitted overall scale (L itself without
+    ``fit_scale``) and the light's (theta, phi) (None unless refined)."""
+    psi: np.ndarray
+    logits: np.ndarray
+    L: np.ndarray
+    direction: tuple = None
+
+
+def reflectance_starts(model) -> list:
+    """Starting coefficients: psi = 0 (the mean material) and the mean of every
+    GMM component (diffuse, shiny, in between): the likelihood has local minima,
+    and these starts cover the clusters of real materials."""
+    starts = [np.zeros(model.basis.n_bases)]
+    if model.gmm is not None:
+        starts += [m.copy() for m in model.gmm.means]
+    return starts
+
+
+def random_chroma_logits(config: Config, n_lobes) -> np.ndarray:
+    """(R, 2) chromaticity variables of the seeded random start."""
+    rng = np.random.default_rng(config.seed)
+    return chroma_logits(rng.dirichlet(np.full(3, START_CHROMA_CONCENTRATION), n_lobes))
+
+
+def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None) -> ReflectanceStep:
+    """Minimise the posterior over psi and the chromaticity variables at fixed light.
+
+    Parameters
+    ----------
+    post : :class:`~mi_dsbrdf.inference.objective.Posterior` (its BSDF and, with
+        ``direction``, its light are left at the result)
+    psi : (k,) start; logits : (R, 2) start; L : (T, 3) light (map texels or one light)
+    iters : at most this many Jacobians
+    fit_scale : the light's overall log scale s is a variable too (the image is
+        proportional to e^s): brightness then moves freely between the light and
+        the material, which the two otherwise trade off only slowly
+    direction : (theta, phi) of a directional or point light, refined jointly
+        (its two Jacobian columns by central differences), which resolves the
+        light/reflectance coupling that alternation resolves slowly
+    """
+    k, R = psi.size, logits.shape[0]
+    view = post.refl
+    n_scale = 1 if fit_scale else 0
+    n_dir = 0 if direction is None else 2
+
+    def unpack(x):
+        ang = None if direction is None else x[k + 2 * R + n_scale:]
+        return x[:k], x[k:k + 2 * R].reshape(R, 2), (x[k + 2 * R] if fit_scale else 0.0), ang
+
+    def aim(ang):
+        if ang is not None:
+            post.aim(*ang)
+
+    def cost(x):
+        p, z, sc, ang = unpack(x)
+        aim(ang)
+        return post.reflectance_terms(p, z, L * np.exp(sc))[0]
+
+    def linearise(x):
+        p, z, sc, ang = unpack(x)
+        Ls = L * np.exp(sc)
+        post.set_reflectance(p, z)
+        dr.enable_grad(post.params["psi"])
+        dr.enable_grad(post.params["chromaticity"])
+        post.params.update()
+        aim(ang)
+        image, J = post.refl.ts.reflectance_jacobian(Ls, post.params, ["psi", "chromaticity"])
+        dr.disable_grad(post.params["psi"])
+        dr.disable_grad(post.params["chromaticity"])
+        c = softmax_chroma(z)
+        dc_dz = softmax_jacobian(c)                                              # (R, 3, 2)
+        Jz = np.einsum("pcrl,rlk->pcrk", J[:, :, k:].reshape(J.shape[0], 3, R, 3), dc_dz).reshape(J.shape[0], 3, -1)
+        extra = [image[:, :, None]] if fit_scale else []
+        if ang is not None:
+            for j in range(2):
+                e = np.zeros(2)
+                e[j] = DIRECTION_STEP
+                hi, lo = [(aim(ang + sgn * e), post.refl.ts.render(Ls))[1] for sgn in (1, -1)]
+                extra.append(((hi - lo) / (2 * DIRECTION_STEP))[:, :, None])
+            aim(ang)
+        J = np.concatenate([J[:, :, :k], Jz] + extra, axis=2)
+        J = J[view.keep].reshape(-1, J.shape[2])
+        mp = np.maximum(image[view.keep], 0) + post.offset
+        d = (np.log(mp) - np.log(np.maximum(view.observed[view.keep], 0) + post.offset)).reshape(-1)
+        Jd = J / mp.reshape(-1, 1)
+        # IRLS weights of the Laplacian, graduated: while most residuals are large the
+        # kink is widened to their median (least squares far away, L1 near the optimum)
+        kink = max(KINK, float(np.median(np.abs(d))))
+        w = view.weight / (np.sqrt(d * d + kink * kink) * post.scale)
+        H = Jd.T @ (Jd * w[:, None])
+        g = Jd.T @ (w * d)
+        if post.model.gmm is not None:
+            H[:k, :k] += post.w["gmm"] * post.model.gmm.dominant_precision(p)
+            g[:k] += post.w["gmm"] * post.model.gmm.grad(p)
+        _, g_curve, h_curve = post.curve_penalty(p)
+        H[:k, :k] += h_curve
+        g[:k] += g_curve
+        if post.model.hue_prior is not None:
+            gh = post.w["hue"] * post.model.hue_prior.grad(c)
+            g[k:k + 2 * R] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
+        return g, H
+
+    def propose(x, step):
+        # chromaticity variables stay within +-CHROMA_LIMIT: a saturated softmax has no gradient left
+        new = x + step
+        new[k:k + 2 * R] = np.clip(new[k:k + 2 * R], -CHROMA_LIMIT, CHROMA_LIMIT)
+        if fit_scale:
+            new[k + 2 * R] = x[k + 2 * R] + np.clip(step[k + 2 * R], -MAX_SCALE_STEP, MAX_SCALE_STEP)
+        return new
+
+    x0 = np.concatenate([psi, logits.reshape(-1), np.zeros(n_scale), np.zeros(n_dir) if direction is None
+                         else np.asarray(direction, dtype=np.float64)])
+    # the start's cost at the light the caller set (the same direction when refined)
+    res = levenberg_marquardt(linearise, cost, x0, propose=propose, max_iter=iters, damping=DAMPING,
+                              cost0=post.reflectance_terms(psi, logits, L)[0])
+    p, z, sc, ang = unpack(res.x)
+    post.set_reflectance(p, z)
+    aim(ang)
+    return ReflectanceStep(p, z, L * np.exp(sc), None if ang is None else tuple(ang))
