@@ -10,17 +10,18 @@ from mi_dsbrdf.backend import select_libllvm as _select_libllvm
 
 _select_libllvm()
 
-from . import backend as _backend  # noqa: E402
+from mi_dsbrdf import backend as _backend  # noqa: E402
 
 _backend.ensure_variant()
 _backend.register_plugins()
 _backend.install_variant_callback()
 
 from mi_dsbrdf.brdf.dsbrdf import Material  # noqa: E402
-from mi_dsbrdf.errors import (BackendError, MaterialError, MeasuredFileError, MiDsbrdfError,  # noqa: E402
-                     ModelError, VariantError)
+from mi_dsbrdf.config import PRESETS, Config  # noqa: E402
+from mi_dsbrdf.errors import (BackendError, ConfigError, InputError, MaterialError,  # noqa: E402
+                              MeasuredFileError, MiDsbrdfError, ModelError, SceneError, VariantError)
 from mi_dsbrdf.model.library import load_material  # noqa: E402
 
 __version__ = "0.1.0"
-__all__ = ["Material", "load_material", "BackendError", "MaterialError", "MeasuredFileError",
-           "MiDsbrdfError", "ModelError", "VariantError"]
+__all__ = ["Material", "load_material", "Config", "PRESETS", "MiDsbrdfError", "BackendError", "VariantError",
+           "MaterialError", "MeasuredFileError", "ModelError", "ConfigError", "InputError", "SceneError"]

@@ -3,7 +3,8 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mi_dsbrdf.inference.scene_needs import SceneError, decide
+from mi_dsbrdf.errors import SceneError
+from mi_dsbrdf.inference.scene_needs import decide
 from mi_dsbrdf.app.scenes import scene_path
 
 

@@ -13,7 +13,7 @@ import mitsuba as mi
 import numpy as np
 import trimesh
 
-from mi_dsbrdf.errors import MiDsbrdfError
+from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.app.io import write_exr
 from mi_dsbrdf.inference.latlong import procedural_sky
 
@@ -52,7 +52,7 @@ def shape_dict(shape: str, bsdf) -> dict:
     elif os.path.exists(shape) and shape.lower().endswith((".ply", ".obj")):
         obj = {"type": shape.lower().rsplit(".", 1)[1], "filename": os.path.abspath(shape)}
     else:
-        raise MiDsbrdfError("shape %r: give %s or an existing .ply/.obj file" % (shape, " or ".join(SHAPES)))
+        raise InputError("shape %r: give %s or an existing .ply/.obj file" % (shape, " or ".join(SHAPES)))
     obj["bsdf"] = bsdf
     return obj
 
@@ -68,7 +68,7 @@ def scene_path(name_or_path: str) -> str:
     if name_or_path in SCENES:
         return os.path.join(SCENE_DIR, SCENES[name_or_path])
     if not os.path.exists(name_or_path):
-        raise FileNotFoundError("no scene %r: give a path or one of %s" % (name_or_path, ", ".join(SCENES)))
+        raise InputError("no scene %r: give a path or one of %s" % (name_or_path, ", ".join(SCENES)))
     return name_or_path
 
 

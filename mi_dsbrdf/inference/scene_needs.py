@@ -20,13 +20,10 @@ import mitsuba as mi
 import numpy as np
 import trimesh
 
-from mi_dsbrdf.errors import MiDsbrdfError
+from mi_dsbrdf.errors import SceneError
+from mi_dsbrdf.plugins import bsdf_classes
 
 GREY_TOLERANCE = 1e-3
-
-
-class SceneError(MiDsbrdfError):
-    """A scene that inference cannot handle (no dsbrdf object, several lights, ...)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,7 +82,8 @@ def is_grey(image, mask=None, tol=GREY_TOLERANCE) -> bool:
 
 def dsbrdf_object(scene):
     """The one shape of ``scene`` with a ``dsbrdf`` BSDF; SceneError otherwise."""
-    objects = [s for s in scene.shapes() if "DSBRDF" in str(s.bsdf()).split("[")[0]]
+    dsbrdf = bsdf_classes(mi.variant())["dsbrdf"]
+    objects = [s for s in scene.shapes() if isinstance(s.bsdf(), dsbrdf)]
     if len(objects) != 1:
         raise SceneError("inference needs exactly one object with a dsbrdf BSDF, found %d" % len(objects))
     return objects[0]

@@ -1,0 +1,39 @@
+"""One frozen, validated Config; the CLI prints its errors (and file errors) as one line."""
+import dataclasses
+
+import pytest
+
+from mi_dsbrdf import PRESETS, Config, ConfigError
+from mi_dsbrdf.app.cli import main
+from mi_dsbrdf.config import PRIOR_PIXELS
+
+
+def test_config_is_frozen_and_validated():
+    cfg = Config()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.max_rounds = 5
+    assert dataclasses.replace(cfg, map_size=[8, 16]).map_size == (8, 16)
+    for bad in (dict(map_size=(1, 8)), dict(map_size="big"), dict(max_rounds=0), dict(block_iters=2.5),
+                dict(tol=0.0), dict(likelihood_scale=float("nan")), dict(w_gmm=-1.0), dict(w_hue=float("inf")),
+                dict(reflectance_pairs=10)):
+        with pytest.raises(ConfigError):
+            Config(**bad)
+
+
+def test_presets_and_prior_weights():
+    assert PRESETS["benchmarked"] == Config()
+    assert PRESETS["demo"].map_size == (16, 32)
+    w = Config(w_gmm=2.0).prior_weights(2 * PRIOR_PIXELS)
+    assert w["gmm"] == pytest.approx(4.0) and w["hue"] == pytest.approx(2.0)
+
+
+def test_cli_prints_config_and_file_errors_as_one_line(tmp_path, capsys):
+    assert main(["recover", "--scene", "x.xml", "--image", "y.exr", "--out", str(tmp_path / "o"),
+                 "--rounds", "0"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mi-dsbrdf: max_rounds must be") and "\n" not in err
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["render", "sphere_envmap", "--out", str(blocker / "sub")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mi-dsbrdf:") and "\n" not in err
