@@ -132,3 +132,31 @@ def test_shipped_library_matches_the_measurements(nbrdf_file):
     assert err == pytest.approx(float(m.arrays["library_error"][i]), rel=1e-4)
     assert err < 0.05
     del fitting
+
+
+def test_a_model_built_in_memory_drives_the_plugin_and_inference():
+    """No file needed: the plugin's ``model`` parameter names an in-memory model by its source."""
+    import mitsuba as mi
+    from mi_dsbrdf.config import Config
+    from mi_dsbrdf.inference.forward import TexelSum
+    from mi_dsbrdf.inference.objective import Posterior
+    from mi_dsbrdf.app.scenes import sphere_scene
+    shipped = model_data.shipped_model()
+    arrays = dict(shipped.arrays, bases=2.0 * shipped.arrays["bases"])     # a different model
+    mem = model_data.ReflectanceModel(arrays)
+    assert mem.source.startswith("memory:") and model_data.load_model(mem.source) is mem
+    k = shipped.basis.n_bases
+    psi = np.zeros(k)
+    psi[0] = 0.5
+
+    def radiance(model, p):
+        s = sphere_scene({"type": "dsbrdf", "model": model.source, "psi": " ".join(map(str, p))}, 12)
+        ts = TexelSum(s, s.shapes()[0], (1, 1)).with_directions(np.array([[0.3, 0.4, 0.87]]), [1.0])
+        return ts.render(np.ones((1, 3)))
+    np.testing.assert_allclose(radiance(mem, psi), radiance(shipped, 2 * psi), rtol=1e-5, atol=1e-7)
+    s = sphere_scene({"type": "dsbrdf"}, 12)
+    ts = TexelSum(s, s.shapes()[0], (2, 4))
+    post = Posterior(ts, np.ones((12, 12, 3)), ts.mask, mem, Config(map_size=(2, 4)))
+    post.set_reflectance(psi, np.zeros((mem.basis.n_lobes, 2)))
+    assert np.isfinite(post.reflectance_terms(psi, np.zeros((mem.basis.n_lobes, 2)), np.ones((8, 3)))[0])
+    assert ts.bsdf is s.shapes()[0].bsdf()         # the caller's view keeps its own BSDF

@@ -25,6 +25,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+import weakref
 
 import numpy as np
 
@@ -37,10 +38,23 @@ SHIPPED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 REQUIRED = ("knots", "mean", "bases", "library_names", "library_psi", "library_chroma")
 
 
-class ReflectanceModel:
-    """Curve basis + library (+ priors) loaded from a model file."""
+#: models built in memory, by their ``source`` name, so that the ``dsbrdf``
+#: plugin's ``model`` parameter (a string) can name them as it names a file
+_IN_MEMORY = weakref.WeakValueDictionary()
 
-    def __init__(self, arrays: dict, source: str = "model"):
+
+class ReflectanceModel:
+    """Curve basis + library (+ priors) from a model file's arrays.
+
+    ``source`` is the file it was read from; a model made from arrays in memory
+    (``source`` None) gets the name ``memory:<n>``, which :func:`load_model` and
+    the plugin's ``<string name="model" value="..."/>`` accept while it lives.
+    """
+
+    def __init__(self, arrays: dict, source: str = None):
+        if source is None:
+            source = "memory:%d" % id(self)
+            _IN_MEMORY[source] = self
         missing = [k for k in REQUIRED if k not in arrays]
         if missing:
             raise ModelError("%s lacks the arrays %s" % (source, ", ".join(missing)))
@@ -96,8 +110,10 @@ class ReflectanceModel:
 
 
 def load_model(path) -> ReflectanceModel:
-    """Read and validate a model file; ModelError names what is wrong."""
+    """Read and validate a model file (or name a model in memory); ModelError names what is wrong."""
     path = os.fspath(path)
+    if path in _IN_MEMORY:
+        return _IN_MEMORY[path]
     try:
         with np.load(path, allow_pickle=False) as f:
             arrays = {k: f[k] for k in f.files}
