@@ -20,9 +20,9 @@ fit is left out of bases and priors) and scores it:
   times recovered / true intensity);
 * ``direction_error_deg`` (point lights);
 * ``illumination_error``: the scale-invariant log-RMSE
-  (:func:`scale_invariant_log_error`) of the seen texels against the truth
+  (:func:`~mi_dsbrdf.evaluation.metrics.scale_invariant_log_error`) of the seen texels against the truth
   map at the recovered resolution (probes);
-* ``relight``: the same measure (:func:`scale_invariant_log_error`) on the
+* ``relight``: the same measure (:func:`~mi_dsbrdf.evaluation.metrics.scale_invariant_log_error`) on the
   recovered material relit under two other probes against the measured
   material under them (paper Fig. 9); the images (truth, recovered at its
   best scale; in units of the truth's mean) are returned for the report;
