@@ -33,6 +33,8 @@ import time
 
 import numpy as np
 
+from mi_dsbrdf.backend import one_blas_thread
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.join(ROOT, "..", "shared", "data")
 OUT = os.path.join(ROOT, "benchmarks", "results", "experiments")
@@ -149,7 +151,7 @@ def run_cases(todo, client, out, data=DATA, cache=CACHE, threads=1, log=print) -
 def run_on_cluster(todo, out, data=DATA, workers=2, scheduler=None, cache=CACHE) -> dict:
     """:func:`run_cases` on the Dask scheduler at ``scheduler``, or on a LocalCluster
     of ``workers`` single-threaded processes; prints and returns the summary."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")       # workers inherit it: one thread per case
+    one_blas_thread()                                   # workers inherit it: one thread per case
     from dask.distributed import Client, LocalCluster
     if scheduler:
         client = Client(scheduler)

@@ -25,6 +25,11 @@ def load(results_dir) -> list:
             r = json.load(f)
         npz = path[:-5] + ".npz"
         r["images_file"] = npz if os.path.exists(npz) else None
+        # results written before both conventions were named: their "Eq. 20" and
+        # "Eq. 5" were the cosine-weighted convention
+        for eq in ("brdf_eq20", "brdf_eq5"):
+            if eq in r:
+                r[eq + "_cosine"] = r.pop(eq)
         out.append(r)
     return out
 
@@ -74,39 +79,43 @@ def write_report(results_dir, docs_dir) -> str:
               rs[0]["case"]["res"] if rs else 64),
           "and recovers it with a reflectance model that never saw it (leave-one-out bases and priors).",
           "Eq. 20 is the BRDF's log-RMSE on the MERL grid after the best overall scale; Eq. 5 uses the",
-          "known light intensity instead. Illumination error: the same log-RMSE after the best scale on the",
+          "known light intensity instead. Both are given in the paper's convention, log(f + 1e-6) (\"paper\"),",
+          "and the cosine-weighted one, log(1 + f cos θi) (\"cosine\"), which hardly sees diffuse and dark",
+          "errors; results computed before the paper convention was measured show a dash there. Illumination error: the same log-RMSE after the best scale on the",
           "texels of the recovered map that a pixel sees, against the probe at that resolution. Relit",
           "error: that measure on the pixels of the material relit under two other probes (32×64 maps)",
           "against the measured material under them.", ""]
 
     # --- summary -------------------------------------------------------------------
-    md += ["## Summary", "", "| cases | n | direction error (median / max) | Eq. 5 | Eq. 20 | illumination | relit |",
-           "|---|---|---|---|---|---|---|"]
+    md += ["## Summary", "", "| cases | n | direction error (median / max) | Eq. 5, cosine | Eq. 20, paper | "
+           "Eq. 20, cosine | illumination | relit |",
+           "|---|---|---|---|---|---|---|---|"]
     for g in ("point", "probe"):
         for priors in (True, False):
             sel = [r for r in group[g] if r["case"]["priors"] == priors]
             if not sel:
                 continue
             d = [r.get("direction_error_deg") for r in sel if "direction_error_deg" in r]
-            md.append("| %s, %s | %d | %s | %s | %s | %s | %s |" % (
+            md.append("| %s, %s | %d | %s | %s | %s | %s | %s | %s |" % (
                 g, "priors" if priors else "no priors", len(sel),
                 "%.2f° / %.2f°" % (np.median(d), np.max(d)) if d else "–",
-                _median([r.get("brdf_eq5") for r in sel]), _median([r["brdf_eq20"] for r in sel]),
+                _median([r.get("brdf_eq5_cosine") for r in sel]), _median([r.get("brdf_eq20_paper") for r in sel]),
+                _median([r["brdf_eq20_cosine"] for r in sel]),
                 _median([r.get("illumination_error") for r in sel]),
                 _median([np.mean(list(r["relight"].values())) for r in sel])))
     md.append("")
 
     # --- Fig. 5: sorted error per case ---------------------------------------------------
-    panels = [(g, sorted([r for r in group[g] if r["case"]["priors"]], key=lambda r: r["brdf_eq20"]))
+    panels = [(g, sorted([r for r in group[g] if r["case"]["priors"]], key=lambda r: r["brdf_eq20_cosine"]))
               for g in ("point", "probe")]
     panels = [p for p in panels if p[1]]
     if panels:
         fig, axes = plt.subplots(1, len(panels), figsize=(6 * len(panels), 4), squeeze=False)
         for ax, (g, sel) in zip(axes[0], panels):
-            ax.bar(range(len(sel)), [r["brdf_eq20"] for r in sel], color="C0")
+            ax.bar(range(len(sel)), [r["brdf_eq20_cosine"] for r in sel], color="C0")
             ax.set_xticks(range(len(sel)))
             ax.set_xticklabels([_label(r) for r in sel], rotation=70, ha="right", fontsize=7)
-            ax.set_ylabel("BRDF error, Eq. 20")
+            ax.set_ylabel("BRDF error, Eq. 20 (cosine)")
             ax.set_title("%s light, with priors (sorted)" % g)
         _save(fig, fig_dir, "fig5_sorted_error.png")
         md += ["## Error per case (Fig. 5)", "", "![sorted error](experiments/fig5_sorted_error.png)", ""]
@@ -131,21 +140,21 @@ def write_report(results_dir, docs_dir) -> str:
         for g, mk in (("point", "o"), ("probe", "s")):
             sel = [(a, b) for a, b in pairs if a["case"]["group"] == g]
             if sel:
-                ax.scatter([b["brdf_eq20"] for a, b in sel], [a["brdf_eq20"] for a, b in sel], marker=mk,
+                ax.scatter([b["brdf_eq20_cosine"] for a, b in sel], [a["brdf_eq20_cosine"] for a, b in sel], marker=mk,
                            label="%s (%d)" % (g, len(sel)))
-        top = max(max(a["brdf_eq20"], b["brdf_eq20"]) for a, b in pairs) * 1.1
+        top = max(max(a["brdf_eq20_cosine"], b["brdf_eq20_cosine"]) for a, b in pairs) * 1.1
         ax.plot([0, top], [0, top], "k:", lw=1)
-        ax.set_xlabel("Eq. 20 without priors")
-        ax.set_ylabel("Eq. 20 with priors")
+        ax.set_xlabel("Eq. 20 (cosine) without priors")
+        ax.set_ylabel("Eq. 20 (cosine) with priors")
         ax.set_title("below the line: the priors help")
         ax.legend()
         _save(fig, fig_dir, "fig7_priors.png")
-        wins = sum(a["brdf_eq20"] < b["brdf_eq20"] for a, b in pairs)
+        wins = sum(a["brdf_eq20_cosine"] < b["brdf_eq20_cosine"] for a, b in pairs)
         md += ["## With and without priors (Fig. 7)", "",
-               "The priors lower Eq. 20 in %d of %d paired cases." % (wins, len(pairs)), "",
+               "The priors lower Eq. 20 (cosine) in %d of %d paired cases." % (wins, len(pairs)), "",
                "![priors](experiments/fig7_priors.png)", "",
-               "| case | Eq. 20 with priors | without |", "|---|---|---|"]
-        md += ["| %s (%s) | %.3f | %.3f |" % (_label(a), a["case"]["group"], a["brdf_eq20"], b["brdf_eq20"])
+               "| case | Eq. 20 (cosine) with priors | without |", "|---|---|---|"]
+        md += ["| %s (%s) | %.3f | %.3f |" % (_label(a), a["case"]["group"], a["brdf_eq20_cosine"], b["brdf_eq20_cosine"])
                for a, b in pairs]
         md.append("")
 
@@ -197,10 +206,10 @@ def write_report(results_dir, docs_dir) -> str:
             m = sorted([r for r in sel if r["case"]["method"] == method], key=lambda r: r["seconds"])
             if not m:
                 continue
-            for ax, key in zip(axes, ("brdf_eq20", "illumination_error")):
+            for ax, key in zip(axes, ("brdf_eq20_cosine", "illumination_error")):
                 ax.plot([r["seconds"] for r in m], [r[key] for r in m], "o-", color=METHOD_COLOURS[method],
                         label=method)
-        axes[0].set_ylabel("BRDF error, Eq. 20")
+        axes[0].set_ylabel("BRDF error, Eq. 20 (cosine)")
         axes[1].set_ylabel("illumination error")
         from matplotlib.ticker import ScalarFormatter
         for ax in axes:
@@ -220,14 +229,14 @@ def write_report(results_dir, docs_dir) -> str:
                "`principled` BSDF and an envmap by Adam through `prb`; its BSDF is scored on the same MERL",
                "grid. Each case ran on one core (two cases at a time).", "",
                "![error against time](experiments/error_vs_time.png)", "",
-               "| method | map | rounds × iterations | spp | seconds | Eq. 20 | illumination |",
+               "| method | map | rounds × iterations | spp | seconds | Eq. 20, cosine | illumination |",
                "|---|---|---|---|---|---|---|"]
         for r in sorted(sel, key=lambda r: (r["case"]["method"], r["seconds"])):
             c = r["case"]
             md.append("| %s | %dx%d | %s | %s | %.0f | %.3f | %.3f |" % (
                 c["method"], c["map"][0], c["map"][1],
                 "%d × %d" % (c["rounds"], c["iters"]) if c["method"] == "dsbrdf" else "%d" % c["iters"],
-                c.get("spp", "–"), r["seconds"], r["brdf_eq20"], r["illumination_error"]))
+                c.get("spp", "–"), r["seconds"], r["brdf_eq20_cosine"], r["illumination_error"]))
         md.append("")
 
     # --- stiff and extreme cases -------------------------------------------------------------
@@ -246,21 +255,21 @@ def write_report(results_dir, docs_dir) -> str:
         md += ["## Stiff and extreme cases", "",
                "How each converges: logged rounds, the negative log posterior at the first and last",
                "of them, and whether every number of the result is finite.", "",
-               "| case | rounds | −log posterior first → last | finite | Eq. 20 | direction | illumination | s |",
+               "| case | rounds | −log posterior first → last | finite | Eq. 20, cosine | direction | illumination | s |",
                "|---|---|---|---|---|---|---|---|"]
         for r in sel:
             t = r["trace"]
             md.append("| %s | %d | %.4g → %.4g | %s | %.3f | %s | %s | %.0f |" % (
-                _label(r), r["rounds"], t[0], t[-1], "yes" if r["finite"] else "**no**", r["brdf_eq20"],
+                _label(r), r["rounds"], t[0], t[-1], "yes" if r["finite"] else "**no**", r["brdf_eq20_cosine"],
                 _fmt(r, "direction_error_deg", "%.2f°"), _fmt(r, "illumination_error", "%.3f"), r["seconds"]))
         md += ["", "![traces](experiments/stiff_traces.png)", ""]
 
     # --- all cases --------------------------------------------------------------------------
-    md += ["## Every case", "", "| id | Eq. 20 | Eq. 5 | direction | illumination | relit | s |",
-           "|---|---|---|---|---|---|---|"]
+    md += ["## Every case", "", "| id | Eq. 20, paper | Eq. 20, cosine | Eq. 5, cosine | direction | illumination "
+           "| relit | s |", "|---|---|---|---|---|---|---|---|"]
     for r in rs:
-        md.append("| %s | %.3f | %s | %s | %s | %.3f | %.0f |" % (
-            r["case"]["id"], r["brdf_eq20"], _fmt(r, "brdf_eq5", "%.3f"), _fmt(r, "direction_error_deg", "%.2f°"),
+        md.append("| %s | %s | %.3f | %s | %s | %s | %.3f | %.0f |" % (
+            r["case"]["id"], _fmt(r, "brdf_eq20_paper", "%.3f"), r["brdf_eq20_cosine"], _fmt(r, "brdf_eq5_cosine", "%.3f"), _fmt(r, "direction_error_deg", "%.2f°"),
             _fmt(r, "illumination_error", "%.3f"),
             float(np.mean(list(r["relight"].values()))), r["seconds"]))
     path = os.path.join(docs_dir, "experiments.md")

@@ -122,3 +122,12 @@ def install_variant_callback() -> None:
     import mitsuba as mi
     mi.detail.add_variant_callback(register_plugins)
     _callback_installed = True
+
+
+def one_blas_thread() -> None:
+    """One BLAS thread in worker processes started after this call (they inherit
+    the environment), unless the user set a count: with several worker processes
+    already filling the cores, OpenBLAS threads of each spin against the others'
+    (full fits ran 2-4x slower here, two workers on two cores)."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")

@@ -20,12 +20,25 @@ def known_material():
                     chromaticity=[[0.5, 0.3, 0.2], [0.3, 0.35, 0.35], [1 / 3, 1 / 3, 1 / 3]], name="known")
 
 
-def test_log_rmse_is_eq5():
+def test_log_rmse_in_both_conventions_by_hand():
+    # the paper's Eq. 5, log(f + 1e-6): an exact zero against 1e-6 costs log 2, as does a factor of 2
+    # anywhere, while 1e-3 vs 1e-3 costs nothing; sqrt((0 + log^2 2 + log^2 2) / 3)
+    model, measured = np.array([[1e-3, 0.0, 2.0]]), np.array([[1e-3, 1e-6, 1.0]])
+    assert log_rmse(model, measured, [1.0], "paper") == pytest.approx(math.log(2) * math.sqrt(2 / 3), rel=1e-6)
+    # the cosine-weighted convention, log(1 + f cos theta_i): blind to the dark values, not to the bright one
+    expect = math.sqrt((math.log(1 + 2 * 0.5) - math.log(1 + 0.5)) ** 2 / 3)
+    assert log_rmse(model, measured, [0.5], "cosine") == pytest.approx(expect, rel=1e-12)
+    # a metal's floor predicted 1e4 times too dark is a large error in one, invisible in the other
+    dark = np.array([[1e-7, 1e-7, 1e-7]]), np.array([[1e-3, 1e-3, 1e-3]])
+    assert log_rmse(*dark, [1.0], "paper") > 6.0 and log_rmse(*dark, [1.0], "cosine") < 1e-3
     rng = np.random.default_rng(1)
     a, b, c = rng.uniform(0, 5, (50, 3)), rng.uniform(0, 5, (50, 3)), rng.uniform(0.1, 1, 50)
-    expect = math.sqrt(np.mean((np.log(1 + a * c[:, None]) - np.log(1 + b * c[:, None])) ** 2))
-    assert log_rmse(a, b, c) == pytest.approx(expect, rel=1e-12)
+    assert log_rmse(a, b, c, "cosine") == pytest.approx(
+        math.sqrt(np.mean((np.log(1 + a * c[:, None]) - np.log(1 + b * c[:, None])) ** 2)), rel=1e-12)
+    assert log_rmse(a, b, c) == log_rmse(a, b, c, "paper")              # the paper's is the default
     assert log_rmse(a, a, c) == 0.0
+    with pytest.raises(ValueError, match="convention"):
+        log_rmse(a, b, c, "eq5")
 
 
 def test_grid_subset_keeps_directions_above_horizon():
@@ -62,7 +75,7 @@ def test_fit_recovers_known_dsbrdf_on_merl_grid():
     table = MeasuredBRDF.from_function(lambda th, td, pd: truth.eval(th, td), name="known")
     s = samples.samples_from_table(table, samples.grid_subset(**SUBSET))
     fit = fitting.fit_full(s)
-    assert fit.error < 2e-3, fit.error
+    assert fit.error < 2e-3 and fit.error_cosine < 2e-3, (fit.error, fit.error_cosine)
     # the lobes come back in specularity order and with the true parameters
     k_fit, g_fit = fit.material.curves(np.linspace(0, math.radians(75), 16))
     k_true, g_true = truth.curves(np.linspace(0, math.radians(75), 16))
@@ -71,7 +84,8 @@ def test_fit_recovers_known_dsbrdf_on_merl_grid():
     np.testing.assert_allclose(fit.material.chromaticity[:2], truth.chromaticity[:2], atol=0.01)
     # and the BRDF everywhere on held-out grid cells
     held = samples.samples_from_table(table, samples.grid_subset(theta_d_step=7, phi_d_step=17))
-    assert log_rmse(fit.material.eval(held.theta_h, held.theta_d), held.values, held.cos_i) < 3e-3
+    for convention in ("paper", "cosine"):
+        assert log_rmse(fit.material.eval(held.theta_h, held.theta_d), held.values, held.cos_i, convention) < 3e-3
 
 
 def test_basis_fit_recovers_psi_and_chromaticity():
@@ -89,17 +103,23 @@ def test_basis_fit_recovers_psi_and_chromaticity():
     np.testing.assert_allclose(fit.material.chromaticity, chroma, atol=0.01)
 
 
+# Error bounds (Eq. 5 on the coarse fit slice), ~25 % above what the shipped objective reaches: chrome
+# 0.64 (paper) / 0.20 (cosine; its peak and its 1e-4/sr floor compete), white-fabric 0.13 / 0.004.
+PAPER_CHROME, COS_CHROME, PAPER_WHITE, COS_WHITE = 0.8, 0.25, 0.16, 0.005
+
+
 def test_fits_of_stiff_merl_materials_converge(nbrdf_file):
     """A near-mirror metal and a near-Lambertian fabric: finite, ordered, accurate."""
-    for name, bound in (("chrome", 0.12), ("white-fabric", 0.02)):
+    for name, paper, cosine in (("chrome", PAPER_CHROME, COS_CHROME), ("white-fabric", PAPER_WHITE, COS_WHITE)):
         w = load_nbrdf_weights(nbrdf_file, name)
         s = samples.samples_from_function(lambda th, td, pd: eval_nbrdf(w, th, td, pd),
                                           samples.grid_subset(**SUBSET), name)
         fit = fitting.fit_full(s)
         m = fit.material
-        assert np.isfinite(fit.error) and fit.error < bound, (name, fit.error)
+        assert fit.error < paper and fit.error_cosine < cosine, (name, fit.error, fit.error_cosine)
         assert np.all(np.isfinite(m.log_kappa)) and np.all(np.isfinite(m.log_gamma))
-        assert np.all(m.log_gamma >= fitting.LOG_GAMMA_BOUNDS[0] - 1e-9)     # no lobe collapses to gamma = 0
+        assert np.all(m.log_gamma[1:] >= fitting.LOG_GAMMA_BOUNDS[0] - 1e-9)  # only the broad lobe may go flat
+        assert np.all(m.log_gamma[0] >= math.log(fitting.OBJECTIVE.broad_gamma_min) - 1e-9)
         assert np.all(np.diff(m.log_gamma.mean(axis=1)) >= 0)                 # specularity order
 
 
@@ -113,3 +133,20 @@ def test_scale_invariant_error_finds_the_scale_and_ignores_it():
     noisy = truth * np.exp(rng.normal(0, 0.2, truth.shape))
     err, s = log_rmse_scale_invariant(noisy * 0.01, truth, cos_i)
     assert err <= log_rmse(noisy, truth, cos_i) + 1e-9 and err < log_rmse(noisy * 0.01, truth, cos_i)
+
+
+def test_fit_keeps_a_dark_floor_under_a_sharp_peak():
+    """A metal-like BRDF: 1e-3/sr everywhere under a peak of ~1e3/sr. The fit must
+    keep the floor (the paper's convention sees it; the cosine one hardly does)."""
+    floor = np.array([1.0e-3, 0.8e-3, 0.6e-3])
+
+    def brdf(th, td, pd):
+        peak = np.expm1(7.0 * np.cos(th) ** 4000.0) * (1.0 + 0.3 * np.sin(td))
+        return floor[None] + peak[:, None] * np.array([[0.9, 1.0, 1.1]])
+    s = samples.samples_from_function(brdf, samples.grid_subset(**SUBSET), "floor")
+    fit = fitting.fit_full(s)
+    th = np.radians(np.linspace(20, 85, 14))
+    for td in np.radians([5.0, 30.0, 60.0]):
+        got = fit.material.eval(th, np.full_like(th, td))
+        np.testing.assert_allclose(got, np.broadcast_to(floor, got.shape), rtol=0.2)
+    assert fit.error < 0.2, fit.error

@@ -19,6 +19,7 @@ def synthetic_fits(M=16):
     rng = np.random.default_rng(5)
     return {"names": ["mat-%02d" % i for i in range(M)], "controls": training_curves(M),
             "chroma": rng.dirichlet(np.ones(3) * 5, (M, 3)), "error": rng.uniform(0, .1, M),
+            "error_cosine": rng.uniform(0, .1, M),
             "flags": [[] for _ in range(M)]}
 
 
@@ -88,8 +89,10 @@ def test_shipped_model_is_complete_and_sane():
     assert len(m.library) == 100 and not m.excluded
     assert m.gmm is not None and m.gmm.dim == 10 and m.hue_prior is not None
     a = m.arrays
-    assert np.all(np.isfinite(a["fit_error"])) and np.all(np.isfinite(a["library_error"]))
-    assert np.median(a["library_error"]) < 0.1
+    for key in ("fit_error", "fit_error_cosine", "library_error", "library_error_cosine"):
+        assert np.all(np.isfinite(a[key])), key
+    # issue 13's bar: the library in the paper's convention, and still good in the cosine one
+    assert np.median(a["library_error"]) < 0.3 and np.median(a["library_error_cosine"]) < 0.1
     assert json.loads(str(a["build_info"]))["k"] == 10
     assert library_names() == sorted(m.library)
 
@@ -128,9 +131,11 @@ def test_shipped_library_matches_the_measurements(nbrdf_file):
     s = build_model.load_samples(nbrdf_file, "pink-felt")
     mat = m.library_material("pink-felt")
     from mi_dsbrdf.evaluation.metrics import log_rmse
-    err = log_rmse(mat.eval(s.theta_h, s.theta_d), s.values, s.cos_i)
-    assert err == pytest.approx(float(m.arrays["library_error"][i]), rel=1e-4)
-    assert err < 0.05
+    values = mat.eval(s.theta_h, s.theta_d)
+    paper, cosine = log_rmse(values, s.values, s.cos_i, "paper"), log_rmse(values, s.values, s.cos_i, "cosine")
+    assert paper == pytest.approx(float(m.arrays["library_error"][i]), rel=1e-4)
+    assert cosine == pytest.approx(float(m.arrays["library_error_cosine"][i]), rel=1e-4)
+    assert paper < 0.3 and cosine < 0.05
     del fitting
 
 

@@ -15,9 +15,12 @@ recovered map's resolution, a point light at distance 5 with intensity 40),
 recovers it with a leave-one-out model (:func:`loo_model`: the material's own
 fit is left out of bases and priors) and scores it:
 
-* ``brdf_eq20``: Eq. 20 on the MERL grid (scale-invariant), for every case;
-* ``brdf_eq5``: Eq. 5 with the known light scale (point lights: the BRDF
-  times recovered / true intensity);
+* ``brdf_eq20_paper``, ``brdf_eq20_cosine``: Eq. 20 on the MERL grid
+  (scale-invariant) in the paper's convention, log(f + 1e-6), and the
+  cosine-weighted one, log(1 + f cos theta_i) (:mod:`~mi_dsbrdf.evaluation.metrics`),
+  for every case;
+* ``brdf_eq5_paper``, ``brdf_eq5_cosine``: Eq. 5 with the known light scale
+  (point lights: the BRDF times recovered / true intensity);
 * ``direction_error_deg`` (point lights);
 * ``illumination_error``: the scale-invariant log-RMSE
   (:func:`~mi_dsbrdf.evaluation.metrics.scale_invariant_log_error`) of the seen texels against the truth
@@ -45,8 +48,8 @@ from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
-from mi_dsbrdf.evaluation.metrics import (bsdf_values, direction_error_deg, log_rmse, log_rmse_scale_invariant,
-                                          scale_invariant_log_error)
+from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, log_rmse,
+                                          log_rmse_scale_invariant, scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.forward import TexelSum
@@ -177,7 +180,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         values = material.eval(samples.theta_h, samples.theta_d)
         out["direction_error_deg"] = direction_error_deg(result.light["direction"], d_true)
         out["intensity_ratio"] = result.light["intensity"] / POINT_INTENSITY
-        out["brdf_eq5"] = log_rmse(values * out["intensity_ratio"], samples.values, samples.cos_i)
+        for c in CONVENTIONS:
+            out["brdf_eq5_" + c] = log_rmse(values * out["intensity_ratio"], samples.values, samples.cos_i, c)
     else:
         probe = read_image(os.path.join(data, "envmaps", case["probe"]))
         truth = downsample(probe, 2 * H, 2 * W)
@@ -200,7 +204,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         small = downsample(truth, H, W)
         out["illumination_error"] = scale_invariant_log_error(recovered_map, small, seen)
         maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
-    out["brdf_eq20"] = log_rmse_scale_invariant(values, samples.values, samples.cos_i)[0]
+    for c in CONVENTIONS:
+        out["brdf_eq20_" + c] = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
     out["trace"] = [float(r["neg_log_posterior"]) for r in rows]
     out["rounds"] = len(rows)
     out["relight"], images = _relight(case, material, merl, data)

@@ -1,9 +1,23 @@
 """Error measures of the paper, as functions over arrays.
 
-* :func:`log_rmse` — Eq. 5, the log-space BRDF error used both to fit
-  reflectance models to measurements and to report how well they fit;
+BRDF errors come in two conventions, always named:
+
+* ``"paper"`` — the paper's Eq. 5: the RMS over measured samples and channels of
+  log(f + 1e-6) - log(rho + 1e-6), f the model and rho the measurement in 1/sr.
+  The floor :data:`PAPER_FLOOR` is the one of the authors' lab's code (iBRDF,
+  ``fit_merl.cpp``: ``log(f + 1e-6)``). It weighs every decade of the BRDF
+  alike: a metal predicted at 1e-14/sr where it reflects 1e-3/sr costs as much
+  as a peak off by a factor of 1000.
+* ``"cosine"`` — the graphics-fitting convention (Löw et al. 2012; the neural-BRDF
+  loss): log(1 + rho cos theta_i). Nearly linear below 0.1/sr, so it hardly sees
+  diffuse and dark errors; it measures what a bright picture shows.
+
+Functions:
+
+* :func:`log_rmse` — Eq. 5 in either convention;
 * :func:`log_rmse_scale_invariant` — Eq. 20, the same after the best overall
   scale of the model: what one image under unknown light can determine;
+* :func:`material_errors` — of a material against measured samples, both conventions;
 * :func:`scale_invariant_log_error` — Eq. 20's measure on images and
   illumination maps; :func:`direction_error_deg` for a recovered light;
 * :func:`bsdf_values` — any Mitsuba BSDF on the MERL grid, to score baselines
@@ -20,36 +34,45 @@ from scipy.optimize import minimize_scalar
 
 from mi_dsbrdf.brdf.angles import from_half_diff
 
+#: Floor of the paper convention's log, log(f + PAPER_FLOOR) (1/sr).
+PAPER_FLOOR = 1e-6
+#: The two conventions of BRDF errors, the paper's first.
+CONVENTIONS = ("paper", "cosine")
 
-def log_brdf(values, cos_i) -> np.ndarray:
-    """log(1 + rho cos theta_i), the quantity Eq. 5 compares.
 
-    ``values``: (N, 3) BRDF values in 1/sr; ``cos_i``: (N,) cosine of the
-    incident angle of each sample. The cosine weighting makes the error measure
-    what a picture shows (radiance), and the log compresses the specular peak
-    so that the diffuse part and the highlight both count.
+def log_brdf(values, cos_i, convention="paper") -> np.ndarray:
+    """The log-BRDF a convention compares: (N, 3) log(rho + 1e-6) (``"paper"``)
+    or log(1 + rho cos theta_i) (``"cosine"``).
+
+    ``values``: (N, 3) BRDF values in 1/sr (negative values count as 0);
+    ``cos_i``: (N,) cosine of the incident angle of each sample (unused by the
+    paper convention).
     """
-    v = np.asarray(values, dtype=np.float64)
-    c = np.asarray(cos_i, dtype=np.float64).reshape(-1, 1)
-    return np.log1p(np.maximum(v, 0.0) * c)
+    v = np.maximum(np.asarray(values, dtype=np.float64), 0.0)
+    if convention == "paper":
+        return np.log(v + PAPER_FLOOR)
+    if convention == "cosine":
+        return np.log1p(v * np.asarray(cos_i, dtype=np.float64).reshape(-1, 1))
+    raise ValueError("unknown error convention %r (use one of %s)" % (convention, ", ".join(CONVENTIONS)))
 
 
-def log_rmse(model_values, measured_values, cos_i) -> float:
-    """Eq. 5: sqrt(mean over samples and channels of
-    [log(1 + rho_model cos theta_i) - log(1 + rho_measured cos theta_i)]^2).
+def log_rmse(model_values, measured_values, cos_i, convention="paper") -> float:
+    """Eq. 5 in a convention (see the module doc): sqrt(mean over samples and
+    channels of [log_brdf(model) - log_brdf(measured)]^2).
 
     ``model_values``, ``measured_values``: (N, 3) float arrays in 1/sr over the
     same N measured samples; ``cos_i``: (N,). Returns a float (dimensionless).
     """
-    a = log_brdf(model_values, cos_i)
-    b = log_brdf(measured_values, cos_i)
+    a = log_brdf(model_values, cos_i, convention)
+    b = log_brdf(measured_values, cos_i, convention)
     if a.shape != b.shape:
         raise ValueError("model and measured values differ in shape: %s vs %s" % (a.shape, b.shape))
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
-def log_rmse_scale_invariant(model_values, measured_values, cos_i) -> tuple:
-    """Eq. 20: min over s > 0 of Eq. 5 between s * model and the measurement.
+def log_rmse_scale_invariant(model_values, measured_values, cos_i, convention="paper") -> tuple:
+    """Eq. 20: min over s > 0 of Eq. 5 (in ``convention``) between s * model and
+    the measurement.
 
     Under illumination of unknown strength only light x reflectance is
     observable, so a recovered BRDF is scored up to one overall scale.
@@ -57,19 +80,19 @@ def log_rmse_scale_invariant(model_values, measured_values, cos_i) -> tuple:
     (Eq. 5 of a scaled model is unimodal in log s in practice; s in 1e-6..1e6).
     """
     m = np.asarray(model_values, dtype=np.float64)
-    res = minimize_scalar(lambda log_s: log_rmse(m * np.exp(log_s), measured_values, cos_i), method="bounded",
-                          bounds=(math.log(1e-6), math.log(1e6)), options={"xatol": 1e-6})
+    res = minimize_scalar(lambda log_s: log_rmse(m * np.exp(log_s), measured_values, cos_i, convention),
+                          method="bounded", bounds=(math.log(1e-6), math.log(1e6)), options={"xatol": 1e-6})
     return float(res.fun), float(np.exp(res.x))
 
 
-def material_error(material, samples, scale_invariant=True) -> float:
+def material_errors(material, samples, scale_invariant=True, conventions=CONVENTIONS) -> dict:
     """Eq. 20 (or Eq. 5) of a material (anything with ``.eval(theta_h, theta_d)``,
     e.g. :class:`~mi_dsbrdf.brdf.dsbrdf.Material`) against measured
-    :class:`~mi_dsbrdf.model.samples.Samples`."""
+    :class:`~mi_dsbrdf.model.samples.Samples`: ``{convention: error}``."""
     values = material.eval(samples.theta_h, samples.theta_d)
     if scale_invariant:
-        return log_rmse_scale_invariant(values, samples.values, samples.cos_i)[0]
-    return log_rmse(values, samples.values, samples.cos_i)
+        return {c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0] for c in conventions}
+    return {c: log_rmse(values, samples.values, samples.cos_i, c) for c in conventions}
 
 
 def direction_error_deg(a, b) -> float:
@@ -84,7 +107,8 @@ def scale_invariant_log_error(values, truth, mask) -> float:
     there, at the best scale s of ``values`` (light and material trade scale)."""
     t = np.asarray(truth, np.float64)[mask]
     ref = max(float(t.mean()), 1e-300)
-    return log_rmse_scale_invariant(np.asarray(values, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]))[0]
+    return log_rmse_scale_invariant(np.asarray(values, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]),
+                                    "cosine")[0]
 
 
 def bsdf_values(bsdf, samples) -> np.ndarray:

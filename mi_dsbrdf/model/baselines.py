@@ -7,7 +7,7 @@ Lambert + L-lobe Cook-Torrance (the paper's Fig. 2 comparison):
 with the Beckmann distribution D, Schlick's Fresnel term with an RGB F0 and the
 Cook-Torrance shadowing term G. Free variables: RGB k_d (3) and per lobe RGB
 k_s (3), roughness m (1) and RGB F0 (3): 10 for one lobe, 24 for three. Fitted
-by minimising Eq. 5 like the DSBRDF (:func:`fit_cook_torrance`).
+by minimising the same objective as the DSBRDF (:func:`fit_cook_torrance`).
 """
 from __future__ import annotations
 
@@ -18,7 +18,8 @@ from scipy.optimize import least_squares
 from scipy.special import expit
 
 from mi_dsbrdf.brdf.angles import from_half_diff
-from mi_dsbrdf.evaluation.metrics import log_brdf, log_rmse
+from mi_dsbrdf.evaluation.metrics import log_rmse
+from mi_dsbrdf.model.fitting import OBJECTIVE, FitObjective
 
 LOG_M_MIN, LOG_M_MAX = math.log(1e-3), math.log(2.0)
 
@@ -46,21 +47,21 @@ def cook_torrance(params, theta_h, theta_d, phi_d, n_lobes) -> np.ndarray:
     return out
 
 
-def fit_cook_torrance(samples, n_lobes, start=None, max_nfev=100):
+def fit_cook_torrance(samples, n_lobes, start=None, max_nfev=100, objective: FitObjective = OBJECTIVE):
     """Fit Lambert + ``n_lobes`` Cook-Torrance lobes to
-    :class:`~mi_dsbrdf.model.samples.Samples` by Eq. 5 (trust-region least squares).
+    :class:`~mi_dsbrdf.model.samples.Samples` by the DSBRDF fits' objective
+    (:class:`~mi_dsbrdf.model.fitting.FitObjective`; trust-region least squares).
 
     Starts: for one lobe, roughness m in {0.02, 0.1, 0.3}; for more, ``start``
     (e.g. a one-lobe fit, whose lobe is copied with m x {0.3, 1, 3}) and a
-    generic start with m in {0.01, 0.08, 0.4}. Returns (params, error on the samples).
+    generic start with m in {0.01, 0.08, 0.4}. Returns (params, Eq. 5 in the paper's
+    convention on the samples).
     """
-    y = log_brdf(samples.values, samples.cos_i)
-    c = samples.cos_i[:, None]
-    scale = 1.0 / math.sqrt(y.size)
+    y = objective.logs(samples.values, samples.cos_i)
 
     def residuals(p):
         f = cook_torrance(p, samples.theta_h, samples.theta_d, samples.phi_d, n_lobes)
-        return ((np.log1p(f * c) - y) * scale).reshape(-1)
+        return (objective.logs(f, samples.cos_i) - y).reshape(-1)
 
     far = samples.theta_h > math.radians(30)
     diffuse = np.maximum(samples.values[far].mean(axis=0) if np.any(far) else samples.values.mean(axis=0), 1e-4)
@@ -91,4 +92,4 @@ def fit_cook_torrance(samples, n_lobes, start=None, max_nfev=100):
         if best is None or sol.cost < best.cost:
             best = sol
     f = cook_torrance(best.x, samples.theta_h, samples.theta_d, samples.phi_d, n_lobes)
-    return best.x, log_rmse(f, samples.values, samples.cos_i)
+    return best.x, log_rmse(f, samples.values, samples.cos_i, "paper")

@@ -17,6 +17,7 @@ Deterministic: the fits are deterministic and the GMM's EM is seeded.
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor
+import dataclasses
 import glob
 import json
 import multiprocessing
@@ -28,12 +29,14 @@ import time
 import numpy as np
 from tqdm import tqdm
 
+from mi_dsbrdf.backend import one_blas_thread
+
 from mi_dsbrdf.brdf import measured
 from mi_dsbrdf.brdf.curves import CurveBasis
 from mi_dsbrdf.brdf.measured import nbrdf_names
 from mi_dsbrdf.errors import MeasuredFileError, ModelError
 from mi_dsbrdf.model import samples
-from mi_dsbrdf.model.fitting import fit_basis, fit_full
+from mi_dsbrdf.model.fitting import OBJECTIVE, fit_basis, fit_full
 from mi_dsbrdf.model.fpca import fpca
 from mi_dsbrdf.model.model_file import load_model
 from mi_dsbrdf.model.priors import fit_hue_concentration, select_gmm
@@ -78,13 +81,13 @@ def _fit_full_job(args):
     source, name = args
     t0 = time.perf_counter()
     f = fit_full(load_samples(source, name))
-    return name, f.variables, f.material.chromaticity, f.error, f.at_bounds, time.perf_counter() - t0
+    return name, f.variables, f.material.chromaticity, (f.error, f.error_cosine), f.at_bounds, time.perf_counter() - t0
 
 
 def _fit_basis_job(args):
     source, name, mean, bases, knots, psi0, chroma0 = args
     f = fit_basis(load_samples(source, name), CurveBasis(mean, bases, knots), psi0, chroma0)
-    return name, f.variables, f.material.chromaticity, f.error
+    return name, f.variables, f.material.chromaticity, (f.error, f.error_cosine)
 
 
 def _map(fn, jobs, workers, desc, progress):
@@ -96,9 +99,7 @@ def _map(fn, jobs, workers, desc, progress):
             out.append(fn(j))
             bar.update()
     else:
-        # one BLAS thread per worker: the workers already fill the cores
-        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            os.environ.setdefault(var, "1")
+        one_blas_thread()
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as ex:
             for r in ex.map(fn, jobs):
                 out.append(r)
@@ -112,13 +113,15 @@ def _map(fn, jobs, workers, desc, progress):
 def fit_all(source, names=None, workers=2, progress=True) -> dict:
     """Full 3-lobe B-spline fits of every material of ``source``.
 
-    Returns ``{"names", "controls" (M, 3, 2, 6), "chroma" (M, 3, 3), "error" (M,),
-    "flags" [list of str per material], "seconds" (M,)}``.
+    Returns ``{"names", "controls" (M, 3, 2, 6), "chroma" (M, 3, 3), "error" (M,)
+    and "error_cosine" (M,) (Eq. 5 on the fit's samples in the paper's and the
+    cosine-weighted convention), "flags" [list of str per material], "seconds" (M,)}``.
     """
     names = source_names(source) if names is None else list(names)
     rows = _map(_fit_full_job, [(os.fspath(source), n) for n in names], workers, "full DSBRDF fits", progress)
     return {"names": [r[0] for r in rows], "controls": np.array([r[1] for r in rows]),
-            "chroma": np.array([r[2] for r in rows]), "error": np.array([r[3] for r in rows]),
+            "chroma": np.array([r[2] for r in rows]), "error": np.array([r[3][0] for r in rows]),
+            "error_cosine": np.array([r[3][1] for r in rows]),
             "flags": [list(r[4]) for r in rows], "seconds": np.array([r[5] for r in rows])}
 
 
@@ -150,17 +153,18 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         rows = _map(_fit_basis_job, jobs, workers, "basis refits (k=%d)" % k, progress)
         psi = np.array([r[1] for r in rows])
         chroma = np.array([r[2] for r in rows])
-        err = np.array([r[3] for r in rows])
+        err = np.array([r[3] for r in rows])                   # (M, 2): paper, cosine
     else:
-        psi, chroma, err = pca.scores[:, :k], fits["chroma"][keep], np.full(len(keep), np.nan)
+        psi, chroma, err = pca.scores[:, :k], fits["chroma"][keep], np.full((len(keep), 2), np.nan)
     sel = select_gmm(psi, seed=SEED)
     kappa_h, n_pairs = fit_hue_concentration(chroma)
     return {
         "knots": np.array(basis.knots), "mean": basis.mean, "bases": basis.bases,
         "fpca_bases": pca.bases, "fpca_variance": pca.variance,
-        "library_names": np.array(kept), "library_psi": psi, "library_chroma": chroma, "library_error": err,
+        "library_names": np.array(kept), "library_psi": psi, "library_chroma": chroma,
+        "library_error": err[:, 0], "library_error_cosine": err[:, 1],
         "fit_names": np.array(names), "fit_controls": fits["controls"], "fit_chroma": fits["chroma"],
-        "fit_error": fits["error"], "fit_flags": np.array(["; ".join(f) for f in fits["flags"]]),
+        "fit_error": fits["error"], "fit_error_cosine": fits["error_cosine"], "fit_flags": np.array(["; ".join(f) for f in fits["flags"]]),
         "gmm_weights": sel.gmm.weights, "gmm_means": sel.gmm.means, "gmm_covariances": sel.gmm.covariances,
         "gmm_covariance_type": np.array(sel.covariance_type),
         "gmm_bic": np.array([(1.0 if ct == "full" else 0.0, c, ll, bic) for ct, c, ll, bic in sel.table]),
@@ -182,7 +186,7 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
         fits = fit_all(source, workers=workers, progress=progress)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
-            "k": k, "excluded": list(exclude), "seed": SEED, "seconds": round(time.perf_counter() - t0, 1),
+            "k": k, "excluded": list(exclude), "seed": SEED, "fit_objective": dataclasses.asdict(OBJECTIVE), "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
             "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
                 os.path.basename(os.fspath(source)), os.path.basename(os.fspath(out)),
@@ -197,7 +201,7 @@ def stored_fits(arrays) -> dict:
     :func:`fit_all` returns and :func:`build_from_fits` takes."""
     a = arrays
     return {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
-            "error": a["fit_error"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
+            "error": a["fit_error"], "error_cosine": a["fit_error_cosine"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
 
 
 def save_model(path, arrays) -> None:

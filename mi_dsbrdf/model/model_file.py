@@ -17,8 +17,10 @@ and the priors
 
 plus what the build keeps for leave-one-out rebuilds and reports (written by
 :mod:`mi_dsbrdf.model.build`): ``fpca_bases``, ``fpca_variance``, the full fits
-``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_error``, ``fit_flags``,
-``library_error``, ``excluded`` and ``build_info`` (JSON).
+``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_flags``, their Eq. 5 errors on
+the fit samples in the paper's and the cosine-weighted convention ``fit_error``,
+``fit_error_cosine``, ``library_error``, ``library_error_cosine``, ``excluded`` and
+``build_info`` (JSON, with the fit objective).
 """
 from __future__ import annotations
 
