@@ -142,8 +142,8 @@ def run_cases(todo, client, out, data=DATA, cache=CACHE, threads=1, log=print) -
             continue
         save_result(r, out)
         summary["done"].append(c["id"])
-        log("[%d/%d] %-60s Eq.20 %.3f  %5.0f s  (%.0f s elapsed)%s" % (
-            i, len(pending), c["id"], r["brdf_eq20"], r["seconds"], time.perf_counter() - t0,
+        log("[%d/%d] %-60s Eq.20 (paper) %.3f  %5.0f s  (%.0f s elapsed)%s" % (
+            i, len(pending), c["id"], r["brdf_eq20_paper"], r["seconds"], time.perf_counter() - t0,
             "" if r["finite"] else "  NON-FINITE"))
     return summary
 

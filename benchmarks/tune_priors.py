@@ -63,7 +63,7 @@ def summarise(out=OUT) -> dict:
         w = c.get("weights")
         key = "none" if not c["priors"] else "illumination=%g gmm=%g hue=%g" % (
             w["w_entropy"], w["w_gmm"], w["w_hue"])
-        table.setdefault(key, {})[c["material"]] = r["brdf_eq20"]
+        table.setdefault(key, {})[c["material"]] = r["brdf_eq20_cosine"]   # the convention the committed sweep used
         weights[key] = w
     n = max(len(v) for v in table.values())
     full = {k: np.array(list(v.values())) for k, v in table.items() if len(v) == n}
