@@ -81,25 +81,27 @@ def write_report(results_dir, docs_dir) -> str:
           "Eq. 20 is the BRDF's log-RMSE on the MERL grid after the best overall scale; Eq. 5 uses the",
           "known light intensity instead. Both are given in the paper's convention, log(f + 1e-6) (\"paper\"),",
           "and the cosine-weighted one, log(1 + f cos θi) (\"cosine\"), which hardly sees diffuse and dark",
-          "errors; results computed before the paper convention was measured show a dash there. Illumination error: the same log-RMSE after the best scale on the",
+          "errors; results computed before the paper convention was measured show a dash there.",
+          "Illumination error: the same log-RMSE after the best scale on the",
           "texels of the recovered map that a pixel sees, against the probe at that resolution. Relit",
           "error: that measure on the pixels of the material relit under two other probes (32×64 maps)",
           "against the measured material under them.", ""]
 
     # --- summary -------------------------------------------------------------------
-    md += ["## Summary", "", "| cases | n | direction error (median / max) | Eq. 5, cosine | Eq. 20, paper | "
-           "Eq. 20, cosine | illumination | relit |",
-           "|---|---|---|---|---|---|---|---|"]
+    md += ["## Summary", "", "| cases | n | direction error (median / max) | Eq. 5, paper | Eq. 5, cosine | "
+           "Eq. 20, paper | Eq. 20, cosine | illumination | relit |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for g in ("point", "probe"):
         for priors in (True, False):
             sel = [r for r in group[g] if r["case"]["priors"] == priors]
             if not sel:
                 continue
             d = [r.get("direction_error_deg") for r in sel if "direction_error_deg" in r]
-            md.append("| %s, %s | %d | %s | %s | %s | %s | %s | %s |" % (
+            md.append("| %s, %s | %d | %s | %s | %s | %s | %s | %s | %s |" % (
                 g, "priors" if priors else "no priors", len(sel),
                 "%.2f° / %.2f°" % (np.median(d), np.max(d)) if d else "–",
-                _median([r.get("brdf_eq5_cosine") for r in sel]), _median([r.get("brdf_eq20_paper") for r in sel]),
+                _median([r.get("brdf_eq5_paper") for r in sel]), _median([r.get("brdf_eq5_cosine") for r in sel]),
+                _median([r.get("brdf_eq20_paper") for r in sel]),
                 _median([r["brdf_eq20_cosine"] for r in sel]),
                 _median([r.get("illumination_error") for r in sel]),
                 _median([np.mean(list(r["relight"].values())) for r in sel])))
@@ -154,8 +156,8 @@ def write_report(results_dir, docs_dir) -> str:
                "The priors lower Eq. 20 (cosine) in %d of %d paired cases." % (wins, len(pairs)), "",
                "![priors](experiments/fig7_priors.png)", "",
                "| case | Eq. 20 (cosine) with priors | without |", "|---|---|---|"]
-        md += ["| %s (%s) | %.3f | %.3f |" % (_label(a), a["case"]["group"], a["brdf_eq20_cosine"], b["brdf_eq20_cosine"])
-               for a, b in pairs]
+        md += ["| %s (%s) | %.3f | %.3f |" % (_label(a), a["case"]["group"], a["brdf_eq20_cosine"],
+                                              b["brdf_eq20_cosine"]) for a, b in pairs]
         md.append("")
 
     # --- Fig. 8: illumination error against specularity ------------------------------------
@@ -255,7 +257,8 @@ def write_report(results_dir, docs_dir) -> str:
         md += ["## Stiff and extreme cases", "",
                "How each converges: logged rounds, the negative log posterior at the first and last",
                "of them, and whether every number of the result is finite.", "",
-               "| case | rounds | −log posterior first → last | finite | Eq. 20, cosine | direction | illumination | s |",
+               "| case | rounds | −log posterior first → last | finite | Eq. 20, cosine | direction | "
+               "illumination | s |",
                "|---|---|---|---|---|---|---|---|"]
         for r in sel:
             t = r["trace"]
@@ -265,11 +268,13 @@ def write_report(results_dir, docs_dir) -> str:
         md += ["", "![traces](experiments/stiff_traces.png)", ""]
 
     # --- all cases --------------------------------------------------------------------------
-    md += ["## Every case", "", "| id | Eq. 20, paper | Eq. 20, cosine | Eq. 5, cosine | direction | illumination "
-           "| relit | s |", "|---|---|---|---|---|---|---|---|"]
+    md += ["## Every case", "", "| id | Eq. 20, paper | Eq. 20, cosine | Eq. 5, paper | Eq. 5, cosine | direction "
+           "| illumination | relit | s |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rs:
-        md.append("| %s | %s | %.3f | %s | %s | %s | %.3f | %.0f |" % (
-            r["case"]["id"], _fmt(r, "brdf_eq20_paper", "%.3f"), r["brdf_eq20_cosine"], _fmt(r, "brdf_eq5_cosine", "%.3f"), _fmt(r, "direction_error_deg", "%.2f°"),
+        md.append("| %s | %s | %.3f | %s | %s | %s | %s | %.3f | %.0f |" % (
+            r["case"]["id"], _fmt(r, "brdf_eq20_paper", "%.3f"), r["brdf_eq20_cosine"],
+            _fmt(r, "brdf_eq5_paper", "%.3f"), _fmt(r, "brdf_eq5_cosine", "%.3f"),
+            _fmt(r, "direction_error_deg", "%.2f°"),
             _fmt(r, "illumination_error", "%.3f"),
             float(np.mean(list(r["relight"].values()))), r["seconds"]))
     path = os.path.join(docs_dir, "experiments.md")

@@ -30,7 +30,6 @@ import numpy as np
 from tqdm import tqdm
 
 from mi_dsbrdf.backend import one_blas_thread
-
 from mi_dsbrdf.brdf import measured
 from mi_dsbrdf.brdf.curves import CurveBasis
 from mi_dsbrdf.brdf.measured import nbrdf_names
@@ -81,7 +80,8 @@ def _fit_full_job(args):
     source, name = args
     t0 = time.perf_counter()
     f = fit_full(load_samples(source, name))
-    return name, f.variables, f.material.chromaticity, (f.error, f.error_cosine), f.at_bounds, time.perf_counter() - t0
+    return (name, f.variables, f.material.chromaticity, (f.error, f.error_cosine), f.at_bounds,
+            time.perf_counter() - t0)
 
 
 def _fit_basis_job(args):
@@ -164,7 +164,8 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         "library_names": np.array(kept), "library_psi": psi, "library_chroma": chroma,
         "library_error": err[:, 0], "library_error_cosine": err[:, 1],
         "fit_names": np.array(names), "fit_controls": fits["controls"], "fit_chroma": fits["chroma"],
-        "fit_error": fits["error"], "fit_error_cosine": fits["error_cosine"], "fit_flags": np.array(["; ".join(f) for f in fits["flags"]]),
+        "fit_error": fits["error"], "fit_error_cosine": fits["error_cosine"],
+        "fit_flags": np.array(["; ".join(f) for f in fits["flags"]]),
         "gmm_weights": sel.gmm.weights, "gmm_means": sel.gmm.means, "gmm_covariances": sel.gmm.covariances,
         "gmm_covariance_type": np.array(sel.covariance_type),
         "gmm_bic": np.array([(1.0 if ct == "full" else 0.0, c, ll, bic) for ct, c, ll, bic in sel.table]),
@@ -186,7 +187,8 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
         fits = fit_all(source, workers=workers, progress=progress)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
-            "k": k, "excluded": list(exclude), "seed": SEED, "fit_objective": dataclasses.asdict(OBJECTIVE), "seconds": round(time.perf_counter() - t0, 1),
+            "k": k, "excluded": list(exclude), "seed": SEED, "fit_objective": dataclasses.asdict(OBJECTIVE),
+            "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
             "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
                 os.path.basename(os.fspath(source)), os.path.basename(os.fspath(out)),
@@ -201,7 +203,8 @@ def stored_fits(arrays) -> dict:
     :func:`fit_all` returns and :func:`build_from_fits` takes."""
     a = arrays
     return {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
-            "error": a["fit_error"], "error_cosine": a["fit_error_cosine"], "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
+            "error": a["fit_error"], "error_cosine": a["fit_error_cosine"],
+            "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
 
 
 def save_model(path, arrays) -> None:
