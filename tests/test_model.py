@@ -7,6 +7,7 @@ import pytest
 
 import mi_dsbrdf
 from mi_dsbrdf import ModelError
+from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.model import build as build_model
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.library import library_names, load_material
@@ -162,6 +163,8 @@ def test_a_model_built_in_memory_drives_the_plugin_and_inference():
     s = sphere_scene({"type": "dsbrdf"}, 12)
     ts = TexelSum(s, s.shapes()[0], (2, 4))
     post = Posterior(ts, np.ones((12, 12, 3)), ts.mask, mem, Config(map_size=(2, 4)))
-    post.set_reflectance(psi, np.zeros((mem.basis.n_lobes, 2)))
     assert np.isfinite(post.reflectance_terms(psi, np.zeros((mem.basis.n_lobes, 2)), np.ones((8, 3)))[0])
+    # the posterior renders with the in-memory model's basis
+    np.testing.assert_allclose(post.material(psi, np.zeros((mem.basis.n_lobes, 2))).log_kappa,
+                               Material.from_basis(shipped.basis, 2 * psi, np.full((3, 3), 1 / 3)).log_kappa)
     assert ts.bsdf is s.shapes()[0].bsdf()         # the caller's view keeps its own BSDF

@@ -96,7 +96,7 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences():
     observed[ts.pixels] = ts.render(procedural_sky(4, 8))
     post = Posterior(ts, observed.reshape(12, 12, 3), ts.mask, model_data.shipped_model(),
                                Config(map_size=(4, 8)))
-    T = post.ts.transport()
+    T = post.transport(np.zeros(post.k), np.zeros((post.R, 2)))
     seen = ~unseen_texels(T).reshape(4, 8)
     x = np.log(procedural_sky(4, 8).astype(np.float64)) + np.random.default_rng(1).normal(0, 0.3, (4, 8, 3))
     bins = post.entropy.bins_for(x)

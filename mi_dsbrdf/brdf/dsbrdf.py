@@ -59,17 +59,29 @@ def clamp_controls(log_kappa, log_gamma):
     return o.fmin(log_kappa, LOG_KAPPA_MAX), o.clip(log_gamma, LOG_GAMMA_MIN, LOG_GAMMA_MAX)
 
 
+def passed_through(log_kappa, log_gamma):
+    """Where :func:`clamp_controls` leaves a control value as it is (its derivative
+    is 1 there, 0 where it clamps): two bool numpy arrays shaped like the inputs."""
+    lk, lg = np.asarray(log_kappa), np.asarray(log_gamma)
+    return lk < LOG_KAPPA_MAX, (lg > LOG_GAMMA_MIN) & (lg < LOG_GAMMA_MAX)
+
+
+def lobe_value(log_cos_h, kappa, gamma):
+    """One lobe of Eq. 4 without its chromaticity: exp[kappa cos^gamma theta_h] - 1
+    (1/sr), from log cos theta_h (guarded at log 1e-30) and the lobe's curves at theta_d."""
+    o = ops(log_cos_h, kappa, gamma)
+    return expm1(kappa * o.exp(gamma * o.fmax(log_cos_h, LOG_COS_H_MIN)))
+
+
 def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS):
     """Eq. 4: the RGB DSBRDF value as three arrays (1/sr).
 
     ``log_cos_h``: log cos theta_h (>= log 1e-30); ``theta_d`` in radians.
     """
-    o = ops(log_cos_h, theta_d)
-    log_cos_h = o.fmax(log_cos_h, LOG_COS_H_MIN)
     kappa, gamma = lobe_curves(theta_d, log_kappa, log_gamma, knots)
     rgb = [0.0, 0.0, 0.0]
     for k, g, c in zip(kappa, gamma, chromaticity):
-        lobe = expm1(k * o.exp(g * log_cos_h))
+        lobe = lobe_value(log_cos_h, k, g)
         rgb = [acc + c_l * lobe for acc, c_l in zip(rgb, c)]
     return rgb
 

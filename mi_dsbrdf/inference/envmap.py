@@ -80,8 +80,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # block; the best posterior starts the alternation
     best = None
     for p0 in reflectance_starts(model):
-        post.set_reflectance(p0, logits0)
-        T = post.ts.transport()
+        T = post.transport(p0, logits0)
         seen = ~unseen_texels(T).reshape(H, W)
         level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
         x = np.full((H, W, 3), np.log(max(level, 1e-12)))
@@ -94,8 +93,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         if best is None or value < best[0]:
             best = (value, step.psi, step.logits, x + float(np.log(step.L.max() / L.max())))
     _, psi, logits, log_map = best
-    post.set_reflectance(psi, logits)
-    T = post.ts.transport()
+    T = post.transport(psi, logits)
     for pass_name in (["grey", "colour"] if colour else ["grey"]):
         prev = None
         for rnd in range(cfg.max_rounds):
@@ -109,8 +107,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             psi, logits = step.psi, step.logits
             log_map = log_map + float(np.log(step.L.max() / L.max()))
             # the full posterior at the new point; its T serves the next illumination block
-            post.set_reflectance(psi, logits)
-            T = post.ts.transport()
+            T = post.transport(psi, logits)
             lik = post.map_likelihood(log_map, T, seen, grad=False)[0]
             terms = post.prior_terms(psi, logits, log_map, bins)
             total = lik + sum(terms.values())

@@ -24,6 +24,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_dsbrdf.brdf.angles import cos_half_diff, log_cos_h
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_solid_angles
 
 #: Pixel-texel pairs evaluated per Dr.Jit launch (memory / speed trade-off).
@@ -56,6 +57,9 @@ class TexelSum:
         self.pixels = np.nonzero(hit)[0]
         idx = mi.UInt32(self.pixels.astype(np.uint32))
         self.si = dr.gather(mi.SurfaceInteraction3f, si, idx)
+        # per pixel: shading frame (s, t, n) and the direction to the camera in it, (3, P) each
+        self.frames = tuple(np.array(v, dtype=np.float64) for v in (self.si.sh_frame.s, self.si.sh_frame.t,
+                                                                    self.si.sh_frame.n, self.si.wi))
         self.bsdf = shape.bsdf()
         H, W = map_size
         self.map_size = (H, W)
@@ -107,6 +111,7 @@ class TexelSum:
         sub = copy.copy(self)
         sub.pixels = self.pixels[rows]
         sub.si = dr.gather(mi.SurfaceInteraction3f, self.si, mi.UInt32(rows.astype(np.uint32)))
+        sub.frames = tuple(f[:, rows] for f in self.frames)
         sub.visibility = None if self.visibility is None else self.visibility[rows]
         if self.light_position is not None:
             sub.directions, sub.solid_angles = self.directions[rows], self.solid_angles[rows]
@@ -171,6 +176,36 @@ class TexelSum:
                 out[:, :, t0:t1] = np.array(f).reshape(3, self.n_pixels, t1 - t0)
         return out
 
+    def pair_geometry(self) -> tuple:
+        """What an isotropic BRDF sees of each pixel-texel pair: (log cos theta_h,
+        theta_d, weight), three Dr.Jit Floats of P*T lanes (pixel-major), the
+        weight cos theta_o * solid angle (* visibility), zero unless the camera and
+        the texel are both above the surface (the plugins' ``both_above``).
+        :class:`~mi_dsbrdf.inference.lobes.LobeSum` evaluates the DSBRDF on them."""
+        # All inputs in one array: with several fresh input arrays Dr.Jit's kernel
+        # hash depends on their allocation order, and every call compiled anew.
+        P, nt = self.n_pixels, self.n_texels
+        n_light = self.directions.shape[0]
+        buf = mi.Float(np.concatenate([np.concatenate(self.frames).reshape(-1), self.directions.T.reshape(-1),
+                                       self.solid_angles.reshape(-1)]).astype(np.float32))
+        lane = dr.arange(mi.UInt32, P * nt)
+        pix = lane // nt
+        per_light = pix if self.light_position is not None else lane - pix * nt
+
+        def rows(first, count, index, width):
+            return [dr.gather(mi.Float, buf, index + (first + k) * width) for k in range(count)]
+        s_, t_, n_, wi = (rows(3 * i, 3, pix, P) for i in range(4))
+        d = [dr.gather(mi.Float, buf, per_light + 12 * P + k * n_light) for k in range(3)]
+        wo = [sum(a * b for a, b in zip(axis, d)) for axis in (s_, t_, n_)]       # to the local frame
+        cos_h, cos_d, sin2_h = cos_half_diff(wi, wo)
+        omega = dr.gather(mi.Float, buf, per_light + 12 * P + 3 * n_light)
+        weight = dr.select((wi[2] > 0) & (wo[2] > 0), wo[2] * omega, 0.0)
+        if self.visibility is not None:
+            weight = dr.select(mi.Bool(self.visibility.reshape(-1)), weight, 0.0)
+        out = (log_cos_h(cos_h, sin2_h), dr.safe_acos(cos_d), weight)
+        dr.eval(*out)
+        return out
+
     def render(self, illumination) -> np.ndarray:
         """(P, 3) float64 pixel radiance for an (H, W, 3) map (no gradients)."""
         return apply_transport(self.transport(), illumination)
@@ -200,15 +235,25 @@ class TexelSum:
 def apply_transport(T, illumination) -> np.ndarray:
     """(P, 3) float64 radiance of the map ``illumination`` (T texels x 3) under the
     channel-major transport ``T`` (3, P, T) of :meth:`TexelSum.transport`."""
-    L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
-    return np.stack([T[c] @ L[:, c] for c in range(3)], axis=1).astype(np.float64)
+    L, scale = unit_scaled(illumination)
+    return np.stack([T[c] @ L[:, c] for c in range(3)], axis=1).astype(np.float64) * scale
 
 
 def transport_adjoint(T, grad_pixels) -> np.ndarray:
     """(T texels, 3) float64: d loss / d L from d loss / d radiance ``grad_pixels``
     (P, 3), the transpose of :func:`apply_transport`."""
-    g = np.asarray(grad_pixels, dtype=np.float32).reshape(-1, 3)
-    return np.stack([g[:, c] @ T[c] for c in range(3)], axis=1).astype(np.float64)
+    g, scale = unit_scaled(grad_pixels)
+    return np.stack([g[:, c] @ T[c] for c in range(3)], axis=1).astype(np.float64) * scale
+
+
+def unit_scaled(values) -> tuple:
+    """((N, 3) float32 values / s, s) with s the largest |value|: the float32 products
+    of a bright sun (1e5) with a sharp lobe's transport (e^85 * solid angle) would
+    overflow; scaled to at most 1 they cannot."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+    s = float(np.abs(v).max()) if v.size else 0.0
+    s = s if s > 0 and np.isfinite(s) else 1.0
+    return (v / s).astype(np.float32), s
 
 
 def unseen_texels(transport, threshold=1e-6) -> np.ndarray:

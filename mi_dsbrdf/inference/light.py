@@ -35,41 +35,41 @@ SEARCH_FRACTION = 0.25
 SEARCH_POWELL_EVALS, POWELL_EVALS = 100, 400
 
 
-def light_likelihood(post, theta, phi, log_intensity) -> float:
-    """Eq. 19 of the image under a light from (theta, phi) of this log intensity."""
+def light_likelihood(post, material, theta, phi, log_intensity) -> float:
+    """Eq. 19 of the image of ``material`` under a light from (theta, phi) of this log intensity."""
     post.aim(theta, phi)
-    return post.likelihood(post.ts.render(np.full((1, 3), np.exp(log_intensity))))
+    return post.likelihood(post.view.render(material, np.full((1, 3), np.exp(log_intensity))))
 
 
-def light_block(post, theta, phi, log_intensity, maxfev=POWELL_EVALS) -> tuple:
+def light_block(post, material, theta, phi, log_intensity, maxfev=POWELL_EVALS) -> tuple:
     """Powell's method on (theta, phi, log intensity) with the reflectance fixed."""
-    res = minimize(lambda v: light_likelihood(post, *v), [theta, phi, log_intensity], method="Powell",
+    res = minimize(lambda v: light_likelihood(post, material, *v), [theta, phi, log_intensity], method="Powell",
                    options={"xtol": 1e-4, "ftol": 1e-7, "maxfev": maxfev})
     return tuple(res.x)
 
 
-def candidate_lights(post, n=SEARCH_DIRECTIONS, keep=SEARCH_KEEP) -> list:
+def candidate_lights(post, material, n=SEARCH_DIRECTIONS, keep=SEARCH_KEEP) -> list:
     """The ``keep`` best of ``n`` directions spread over the sphere (Fibonacci
     lattice), each with the intensity that matches the image's median level under
-    the current reflectance: [(likelihood, theta, phi, log intensity), ...]."""
+    ``material``: [(likelihood, theta, phi, log intensity), ...]."""
     found = []
     i = np.arange(n) + 0.5
     thetas, phis = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
     for th, ph in zip(thetas, phis):
-        log_i = matched_log_intensity(post, th, ph)
+        log_i = matched_log_intensity(post, material, th, ph)
         if log_i is None:
             continue
-        found.append((light_likelihood(post, th, ph, log_i), th, ph % (2 * np.pi), log_i))
+        found.append((light_likelihood(post, material, th, ph, log_i), th, ph % (2 * np.pi), log_i))
     if not found:
         raise InputError("no light direction lights the observed pixels")
     return sorted(found)[:keep]
 
 
-def matched_log_intensity(post, theta, phi):
+def matched_log_intensity(post, material, theta, phi):
     """Log intensity that matches the median observed level of the pixels a light
-    from (theta, phi) reaches under the current reflectance; None if it reaches none."""
+    from (theta, phi) reaches under ``material``; None if it reaches none."""
     post.aim(theta, phi)
-    lit = post.ts.render(np.ones((1, 3))).mean(axis=1)[post.keep]
+    lit = post.view.render(material, np.ones((1, 3))).mean(axis=1)[post.keep]
     if not np.any(lit > 0):
         return None
     ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
@@ -82,7 +82,7 @@ def highlight_lights(post) -> list:
     glossy one), as [(theta, phi), ...]."""
     lum = np.where(post.keep, post.observed.mean(axis=1), -np.inf)
     i = int(np.argmax(lum))
-    si = post.ts.si
+    si = post.view.texels.si
     n = np.array(si.n)[:, i].astype(np.float64)
     v = np.array(si.to_world(si.wi))[:, i].astype(np.float64)
     mirror = 2 * (n @ v) * n - v
@@ -117,11 +117,11 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
             progress(rows[-1])
 
     if known_light is None:
-        post.set_reflectance(psi, logits)
+        mean_material = post.material(psi, logits)
         best = None
-        cands = [c[1:] for c in candidate_lights(post)]
+        cands = [c[1:] for c in candidate_lights(post, mean_material)]
         for th, ph in highlight_lights(post):
-            li = matched_log_intensity(post, th, ph)
+            li = matched_log_intensity(post, mean_material, th, ph)
             if li is not None:
                 cands.append((th, ph, li))
         for th, ph, li in cands:
@@ -129,8 +129,8 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
             step = reflectance_block(post, psi, logits, np.full((1, 3), np.exp(li)),
                                      max(int(cfg.block_iters * SEARCH_FRACTION), 5), fit_scale=True)
             li = float(np.log(step.L[0, 0]))
-            post.set_reflectance(step.psi, step.logits)
-            th, ph, li = light_block(post, th, ph, li, maxfev=SEARCH_POWELL_EVALS)     # coarse: refined later
+            th, ph, li = light_block(post, post.material(step.psi, step.logits), th, ph, li,
+                                     maxfev=SEARCH_POWELL_EVALS)                     # coarse: refined later
             post.aim(th, ph)
             value = post.reflectance_terms(step.psi, step.logits, np.full((1, 3), np.exp(li)))[0]
             log({"pass": "light search", "round": len(rows), "neg_log_posterior": value})
@@ -142,9 +142,8 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         log_i = float(np.log(known_light[1]))
     prev = None
     for rnd in range(cfg.max_rounds):
-        post.set_reflectance(psi, logits)
         if known_light is None:
-            theta, phi, log_i = light_block(post, theta, phi, log_i)
+            theta, phi, log_i = light_block(post, post.material(psi, logits), theta, phi, log_i)
         L = np.full((1, 3), np.exp(log_i))
         post.aim(theta, phi)
         if rnd == 0:

@@ -6,9 +6,10 @@
 
 :class:`Posterior` evaluates it term by term, each weighted by the
 :class:`~mi_dsbrdf.config.Config` weights scaled to the observed pixel count.
-It owns a ``dsbrdf`` BSDF with the model's basis (``psi`` and ``chromaticity``
-differentiable) and its own copies of the caller's
-:class:`~mi_dsbrdf.inference.forward.TexelSum`: it changes nothing it is given.
+It renders through :class:`~mi_dsbrdf.inference.lobes.LobeSum` views of the
+caller's :class:`~mi_dsbrdf.inference.forward.TexelSum`, with the material
+(psi, chromaticity variables) passed to each call: it holds no material state
+and changes nothing it is given.
 The blocks that minimise it are :mod:`~mi_dsbrdf.inference.envmap` (the
 illumination map), :mod:`~mi_dsbrdf.inference.light` (a point or directional
 light) and :mod:`~mi_dsbrdf.inference.reflectance` (psi and chromaticity).
@@ -17,12 +18,13 @@ from __future__ import annotations
 
 import dataclasses
 
-import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.brdf.chromaticity import softmax_chroma
+from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint
+from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior
 from mi_dsbrdf.inference.likelihood import LOG_OFFSET, log_likelihood_terms
 
@@ -37,9 +39,9 @@ MIN_REFLECTANCE_PIXELS = 64
 
 @dataclasses.dataclass(frozen=True)
 class PixelView:
-    """Pixels a block works on: their TexelSum, observed values (P, 3), usable
+    """Pixels a block works on: their LobeSum, observed values (P, 3), usable
     flags (P,) and the factor that makes their likelihood stand for all usable pixels."""
-    ts: TexelSum
+    lobes: LobeSum
     observed: np.ndarray
     keep: np.ndarray
     weight: float
@@ -79,18 +81,17 @@ class Posterior:
         self.offset = LOG_OFFSET * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
         self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
         self.k, self.R = model.basis.n_bases, model.basis.n_lobes
-        self.bsdf = mi.load_dict({"type": "dsbrdf", "model": model.source, "psi": " ".join(["0"] * self.k)})
-        self.params = mi.traverse(self.bsdf)
-        self.ts = texels.with_bsdf(self.bsdf)
+        self.view = LobeSum(texels)
         # the reflectance block's pixels: an evenly spread subset, its likelihood
         # scaled up to stand for all usable pixels
         usable = np.nonzero(keep)[0]
         n_sub = max(MIN_REFLECTANCE_PIXELS, config.reflectance_pairs // max(texels.n_texels, 1))
         if usable.size > n_sub:
             rows = usable[np.linspace(0, usable.size - 1, n_sub).round().astype(np.int64)]
-            self.refl = PixelView(self.ts.subset(rows), obs[rows], np.ones(rows.size, bool), usable.size / rows.size)
+            self.refl = PixelView(self.view.subset(rows), obs[rows], np.ones(rows.size, bool),
+                                  usable.size / rows.size)
         else:
-            self.refl = PixelView(self.ts, obs, keep, 1.0)
+            self.refl = PixelView(self.view, obs, keep, 1.0)
         # the range of the library's kappa/gamma control values: a recovered curve
         # stays within CURVE_MARGIN of it (one image sees few theta_d; without this
         # box the unobserved, grazing end of a curve can run off to kappa = e^85)
@@ -108,21 +109,27 @@ class Posterior:
         a directional light, or the point light at ``distance`` from ``centre``
         that way (its intensity then stands for W/sr, not irradiance)."""
         d = direction_from_angles(theta, phi)
-        whole = self.refl.ts is self.ts
+        whole = self.refl.lobes is self.view
 
-        def lit(ts):
+        def lit(view):
             if self.point is None:
-                return ts.with_directions(d[None], [1.0])
-            return ts.with_point(np.asarray(self.point[0]) + self.point[1] * d)
-        self.ts = lit(self.ts)
-        self.refl = dataclasses.replace(self.refl, ts=self.ts if whole else lit(self.refl.ts))
+                return view.with_directions(d[None], [1.0])
+            return view.with_point(np.asarray(self.point[0]) + self.point[1] * d)
+        self.view = lit(self.view)
+        self.refl = dataclasses.replace(self.refl, lobes=self.view if whole else lit(self.refl.lobes))
 
     # --- reflectance -------------------------------------------------------------
-    def set_reflectance(self, psi, logits) -> None:
-        """Put psi (k,) and the chromaticity variables (R, 2) into the BSDF."""
-        self.params["psi"] = mi.Float(np.asarray(psi, dtype=np.float32))
-        self.params["chromaticity"] = mi.Float(softmax_chroma(logits).reshape(-1).astype(np.float32))
-        self.params.update()
+    def material(self, psi, logits) -> Material:
+        """The DSBRDF of psi (k,) and the chromaticity variables (R, 2)."""
+        return Material.from_basis(self.model.basis, psi, softmax_chroma(logits))
+
+    def transport(self, psi, logits) -> np.ndarray:
+        """(3, P, T) transport of all pixels under the material (psi, logits)."""
+        return self.view.transport(self.material(psi, logits))
+
+    def render(self, psi, logits, L) -> np.ndarray:
+        """(P, 3) radiance of all pixels under the material and the light L (T, 3)."""
+        return self.view.render(self.material(psi, logits), L)
 
     def prior_terms(self, psi, logits, log_map=None, bins=None) -> dict:
         """The weighted prior terms one by one, for the log: the curve penalty, GMM
@@ -152,10 +159,9 @@ class Posterior:
         """(value, likelihood) of likelihood + GMM + hue priors + curve penalty at
         fixed L, the likelihood over the reflectance block's pixels (``self.refl``),
         no gradients (the block takes its derivatives from
-        :meth:`~mi_dsbrdf.inference.forward.TexelSum.reflectance_jacobian`)."""
-        self.set_reflectance(psi, logits)
+        :meth:`~mi_dsbrdf.inference.lobes.LobeSum.jacobian`)."""
         v = self.refl
-        lik = self.likelihood(v.ts.render(L), v.observed, v.keep) * v.weight
+        lik = self.likelihood(v.lobes.render(self.material(psi, logits), L), v.observed, v.keep) * v.weight
         return lik + sum(self.prior_terms(psi, logits).values()), lik
 
     def likelihood(self, image, observed=None, keep=None) -> float:

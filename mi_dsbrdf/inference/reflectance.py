@@ -3,8 +3,9 @@
 Levenberg-Marquardt (:func:`mi_dsbrdf.lm.levenberg_marquardt`) with iteratively
 reweighted residuals (IRLS): the Laplacian likelihood sum rho(d_i)/b is
 minimised as a sequence of weighted least-squares problems, weights
-w_i = rho'(d_i)/(d_i b), with the image Jacobian by forward-mode AD through the
-``dsbrdf`` plugin (:meth:`~mi_dsbrdf.inference.forward.TexelSum.reflectance_jacobian`).
+w_i = rho'(d_i)/(d_i b), with the exact image Jacobian of
+:meth:`~mi_dsbrdf.inference.lobes.LobeSum.jacobian` (by the spline control
+values, chained to psi through the basis).
 The GMM prior enters as the quadratic of its most responsible component, the
 hue prior through its gradient, the curve penalty exactly. A step is kept only
 if the full negative log posterior falls.
@@ -13,10 +14,10 @@ from __future__ import annotations
 
 import dataclasses
 
-import drjit as dr
 import numpy as np
 
 from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
+from mi_dsbrdf.brdf.dsbrdf import passed_through
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.likelihood import KINK
 from mi_dsbrdf.lm import Damping, levenberg_marquardt
@@ -60,13 +61,22 @@ def random_chroma_logits(config: Config, n_lobes) -> np.ndarray:
     return chroma_logits(rng.dirichlet(np.full(3, START_CHROMA_CONCENTRATION), n_lobes))
 
 
+def psi_jacobian(basis, psi, controls_jacobian) -> np.ndarray:
+    """(P, 3, k) d radiance / d psi from d radiance / d control values (P, 3, R, 2, 6)
+    (:class:`~mi_dsbrdf.inference.lobes.LobeJacobian`): control values = mean +
+    bases psi (Eq. 2-3), then clamped, and a clamped one does not move."""
+    ctrl = basis.control_values(psi)
+    free = np.stack(passed_through(ctrl[:, 0], ctrl[:, 1]), axis=1)             # (R, 2, 6)
+    return np.einsum("pcrjm,irjm->pci", controls_jacobian, basis.bases * free)
+
+
 def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None) -> ReflectanceStep:
     """Minimise the posterior over psi and the chromaticity variables at fixed light.
 
     Parameters
     ----------
-    post : :class:`~mi_dsbrdf.inference.objective.Posterior` (its BSDF and, with
-        ``direction``, its light are left at the result)
+    post : :class:`~mi_dsbrdf.inference.objective.Posterior` (with ``direction``,
+        its light is left at the result)
     psi : (k,) start; logits : (R, 2) start; L : (T, 3) light (map texels or one light)
     iters : at most this many Jacobians
     fit_scale : the light's overall log scale s is a variable too (the image is
@@ -97,26 +107,24 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
     def linearise(x):
         p, z, sc, ang = unpack(x)
         Ls = L * np.exp(sc)
-        post.set_reflectance(p, z)
-        dr.enable_grad(post.params["psi"])
-        dr.enable_grad(post.params["chromaticity"])
-        post.params.update()
+        material = post.material(p, z)
         aim(ang)
-        image, J = post.refl.ts.reflectance_jacobian(Ls, post.params, ["psi", "chromaticity"])
-        dr.disable_grad(post.params["psi"])
-        dr.disable_grad(post.params["chromaticity"])
+        jac = post.refl.lobes.jacobian(material, Ls)
+        image = jac.image
+        Jp = psi_jacobian(post.model.basis, p, jac.controls)
         c = softmax_chroma(z)
         dc_dz = softmax_jacobian(c)                                              # (R, 3, 2)
-        Jz = np.einsum("pcrl,rlk->pcrk", J[:, :, k:].reshape(J.shape[0], 3, R, 3), dc_dz).reshape(J.shape[0], 3, -1)
+        # channel c depends on chromaticity (r, c) only
+        Jz = np.einsum("pcr,rck->pcrk", jac.chromaticity, dc_dz).reshape(image.shape[0], 3, -1)
         extra = [image[:, :, None]] if fit_scale else []
         if ang is not None:
             for j in range(2):
                 e = np.zeros(2)
                 e[j] = DIRECTION_STEP
-                hi, lo = [(aim(ang + sgn * e), post.refl.ts.render(Ls))[1] for sgn in (1, -1)]
+                hi, lo = [(aim(ang + sgn * e), post.refl.lobes.render(material, Ls))[1] for sgn in (1, -1)]
                 extra.append(((hi - lo) / (2 * DIRECTION_STEP))[:, :, None])
             aim(ang)
-        J = np.concatenate([J[:, :, :k], Jz] + extra, axis=2)
+        J = np.concatenate([Jp, Jz] + extra, axis=2)
         J = J[view.keep].reshape(-1, J.shape[2])
         mp = np.maximum(image[view.keep], 0) + post.offset
         d = (np.log(mp) - np.log(np.maximum(view.observed[view.keep], 0) + post.offset)).reshape(-1)
@@ -152,6 +160,5 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
     res = levenberg_marquardt(linearise, cost, x0, propose=propose, max_iter=iters, damping=DAMPING,
                               cost0=post.reflectance_terms(psi, logits, L)[0])
     p, z, sc, ang = unpack(res.x)
-    post.set_reflectance(p, z)
     aim(ang)
     return ReflectanceStep(p, z, L * np.exp(sc), None if ang is None else tuple(ang))

@@ -1,0 +1,142 @@
+"""Fast forward model of a ``dsbrdf`` object: the texel sum with Eq. 4 evaluated
+on each pixel-texel pair's stored angles, and its exact derivatives in closed form.
+
+:class:`~mi_dsbrdf.inference.forward.TexelSum` evaluates any Mitsuba BSDF
+through its plugin and differentiates it by Dr.Jit's forward-mode AD, one
+parameter per pass: the plain reference, which the tests hold this module to.
+Inference only ever needs the DSBRDF, which sees a pair through three numbers
+(log cos theta_h, theta_d and the weight cos theta_o * solid angle * visibility,
+:meth:`~mi_dsbrdf.inference.forward.TexelSum.pair_geometry`) and whose
+derivatives by the spline control values (:mod:`mi_dsbrdf.brdf.curves`) are
+
+    lobe_r = expm1(u_r),   u_r = kappa_r(theta_d) exp(x_r),   x_r = gamma_r(theta_d) log cos theta_h
+    d lobe_r / d a_rm = e^{u_r} u_r B_m(theta_d)                    (a: log kappa control values)
+    d lobe_r / d g_rm = e^{u_r} kappa_r x_r e^{x_r} B_m(theta_d)    (g: log gamma control values)
+
+(a curve clamp never binds: the control values are clamped, and the B-spline
+weights are >= 0 and sum to one). So :class:`LobeSum` stores the three numbers
+once per view and light, and one Dr.Jit kernel evaluates every lobe and all 36
+derivative columns; the sums over texels are float32 BLAS products with the
+map. Hand-written for measured speed (``benchmarks/inference_cases.py``): the
+plugin path needs one forward-mode pass per column and re-derives the angles in
+every pass. The kernel is Dr.Jit code of the active variant (``cuda_ad_rgb``
+runs it on a GPU); the BLAS products run on the CPU.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_dsbrdf.brdf.curves import N_CONTROL, spline_basis
+from mi_dsbrdf.brdf.dsbrdf import LOG_COS_H_MIN, lobe_curves, lobe_rgb, lobe_value
+from mi_dsbrdf.inference.forward import CHUNK, TexelSum, apply_transport, unit_scaled
+
+
+@dataclasses.dataclass(frozen=True)
+class LobeJacobian:
+    """Pixel radiance and its derivatives under a fixed light.
+
+    image : (P, 3) radiance
+    controls : (P, 3, R, 2, 6) d radiance / d control value (``[:, :, r, 0, m]``
+        log kappa, ``[:, :, r, 1, m]`` log gamma of lobe r)
+    chromaticity : (P, 3, R) d radiance_c / d chromaticity_{r, c} (channel c
+        depends on its own chromaticity only)
+    """
+    image: np.ndarray
+    controls: np.ndarray
+    chromaticity: np.ndarray
+
+
+class LobeSum:
+    """The view of a :class:`~mi_dsbrdf.inference.forward.TexelSum` (its pixels,
+    light and visibility) for DSBRDF materials given as
+    :class:`~mi_dsbrdf.brdf.dsbrdf.Material`. Immutable, like the TexelSum."""
+
+    def __init__(self, texels: TexelSum):
+        self.texels = texels
+        self.n_pixels, self.n_texels = texels.n_pixels, texels.n_texels
+        self.log_cos_h, self.theta_d, self.weight = texels.pair_geometry()
+
+    def subset(self, rows) -> "LobeSum":
+        """The same view restricted to the pixels ``texels.pixels[rows]``."""
+        return LobeSum(self.texels.subset(rows))
+
+    def with_point(self, position) -> "LobeSum":
+        return LobeSum(self.texels.with_point(position))
+
+    def with_directions(self, directions, solid_angles) -> "LobeSum":
+        return LobeSum(self.texels.with_directions(directions, solid_angles))
+
+    # --- kernels -----------------------------------------------------------------
+    def _rows(self):
+        """Pixel ranges [p0, p1) of at most CHUNK pairs, and their lanes."""
+        step = max(1, CHUNK // max(self.n_texels, 1))
+        for p0 in range(0, self.n_pixels, step):
+            p1 = min(p0 + step, self.n_pixels)
+            lanes = dr.arange(mi.UInt32, p0 * self.n_texels, p1 * self.n_texels)
+            yield p0, p1, [dr.gather(mi.Float, a, lanes) for a in (self.log_cos_h, self.theta_d, self.weight)]
+
+    @staticmethod
+    def _scalars(material):
+        """The material's log kappa, log gamma control values and chromaticity as
+        lists (per lobe) of Dr.Jit scalars, gathered from one array: not literals,
+        so that a new material does not compile a new kernel (and one fresh array,
+        whose kernels hash the same on every call)."""
+        R = material.n_lobes
+        buf = mi.Float(np.concatenate([material.log_kappa.reshape(-1), material.log_gamma.reshape(-1),
+                                       material.chromaticity.reshape(-1)]).astype(np.float32))
+
+        def scalars(first, width):
+            return [[dr.gather(mi.Float, buf, first + r * width + j) for j in range(width)] for r in range(R)]
+        return scalars(0, N_CONTROL), scalars(R * N_CONTROL, N_CONTROL), scalars(2 * R * N_CONTROL, 3)
+
+    def _channels(self, material, out):
+        """Fill ``out`` (3, P, T) with weight * Eq. 4 per colour channel."""
+        lk, lg, ch = self._scalars(material)
+        for p0, p1, (lc, td, w) in self._rows():
+            rgb = [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
+            dr.eval(*rgb)
+            for c in range(3):
+                out[c, p0:p1] = rgb[c].numpy().reshape(p1 - p0, self.n_texels)
+        return out
+
+    def transport(self, material) -> np.ndarray:
+        """(3, P, T) float32 transport of :meth:`TexelSum.transport`:
+        radiance[p, c] = T[c, p] @ L[:, c]."""
+        return self._channels(material, np.empty((3, self.n_pixels, self.n_texels), np.float32))
+
+    def render(self, material, illumination) -> np.ndarray:
+        """(P, 3) float64 radiance under ``illumination`` (T, 3)."""
+        return apply_transport(self.transport(material), illumination)
+
+    def jacobian(self, material, illumination) -> LobeJacobian:
+        """Radiance under ``illumination`` (T, 3) and its exact derivatives by every
+        control value and chromaticity of ``material`` (see the module doc)."""
+        lk, lg, _ = self._scalars(material)
+        R = material.n_lobes
+        L, s = unit_scaled(illumination)
+        sums = np.empty((R, 1 + 2 * N_CONTROL, self.n_pixels, 3))
+        for p0, p1, (lc, td, w) in self._rows():
+            basis = spline_basis(td, material.knots)
+            kappa, gamma = lobe_curves(td, lk, lg, material.knots)
+            cols = []
+            for k, g in zip(kappa, gamma):
+                x = g * dr.fmax(lc, LOG_COS_H_MIN)
+                ex = dr.exp(x)
+                u = k * ex
+                lobe = lobe_value(lc, k, g)
+                e = (lobe + 1.0) * w                # e^u * weight (the product's order keeps float32 finite)
+                d_kappa, d_gamma = e * u, (e * k) * (x * ex)
+                cols += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
+            dr.eval(*cols)
+            A = np.stack([c.numpy().reshape(p1 - p0, self.n_texels) for c in cols])
+            sums[:, :, p0:p1] = (A.reshape(-1, self.n_texels) @ L).reshape(R, 1 + 2 * N_CONTROL, p1 - p0, 3)
+        sums *= s
+        c = material.chromaticity                                   # (R, 3)
+        image = np.einsum("rc,rpc->pc", c, sums[:, 0])
+        d_ctrl = np.einsum("rc,rjpc->pcrj", c, sums[:, 1:]).reshape(self.n_pixels, 3, R, 2, N_CONTROL)
+        d_chroma = np.transpose(sums[:, 0], (1, 2, 0))              # (P, 3, R)
+        return LobeJacobian(image, d_ctrl, d_chroma)
