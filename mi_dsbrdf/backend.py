@@ -9,6 +9,7 @@ instead of an abort later on.
 """
 from __future__ import annotations
 
+import functools
 import glob
 import os
 import re
@@ -131,3 +132,18 @@ def one_blas_thread() -> None:
     (full fits ran 2-4x slower here, two workers on two cores)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
+
+
+def single_blas_thread(function):
+    """Decorator: ``function`` runs with BLAS on one thread (threadpoolctl).
+    Inference alternates Dr.Jit kernels (on Dr.Jit's own thread pool) with BLAS
+    products of the transport, which are bound by memory bandwidth: a second
+    BLAS thread does not speed them up, and its spinning against Dr.Jit's
+    threads made a whole recovery 1.5x slower here (31 s against 20 s)."""
+    from threadpoolctl import threadpool_limits
+
+    @functools.wraps(function)
+    def run(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return function(*args, **kwargs)
+    return run

@@ -40,6 +40,9 @@ class Config:
         the GMM prior strong (it resolves the split of gloss between material and
         light), the others at 1 (a strong hue prior traps the chromaticity from its
         random start)
+    map_levels : map resolutions, coarse to fine: the start runs on ``map_size``
+        halved ``map_levels - 1`` times and the last pass on ``map_size``
+        (:func:`mi_dsbrdf.inference.envmap.map_sizes`); 1: everything on ``map_size``
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
         step: it fits 16 variables, so an evenly spread subset of the pixels does
         (the Jacobian's cost is proportional to pixels x texels)
@@ -55,6 +58,7 @@ class Config:
     w_hue: float = 1.0
     w_entropy: float = 1.0
     w_gradient: float = 1.0
+    map_levels: int = 3
     reflectance_pairs: int = 500_000
 
     def __post_init__(self):
@@ -65,7 +69,7 @@ class Config:
         if h < 2 or w < 4:
             raise ConfigError("map_size %dx%d is too small (at least 2x4)" % (h, w))
         object.__setattr__(self, "map_size", (h, w))
-        for name, low in (("max_rounds", 1), ("block_iters", 1), ("illumination_iters", 1),
+        for name, low in (("max_rounds", 1), ("block_iters", 1), ("illumination_iters", 1), ("map_levels", 1),
                           ("reflectance_pairs", 64)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:

@@ -111,3 +111,18 @@ def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
     # texels straight behind the sphere are seen by no pixel: black, and counted
     assert (~res.seen).sum() == res.log[-1]["unseen_texels"] > 0
     assert np.all(res.illumination[~res.seen] == 0) and np.all(res.illumination[res.seen] > 0)
+
+
+def test_coarse_to_fine_map_sizes_and_resampling():
+    from mi_dsbrdf.inference.envmap import BLACK, map_sizes, resample
+    assert map_sizes((32, 64), 3, 2) == [(8, 16), (16, 32), (32, 64)]
+    assert map_sizes((32, 64), 3, 1) == [(8, 16), (32, 64)]
+    assert map_sizes((32, 64), 1, 2) == [(32, 64)] * 3
+    assert map_sizes((4, 8), 3, 2) == [(2, 4), (2, 4), (4, 8)]         # never below 2 x 4
+    x = np.log(np.arange(1, 9, dtype=np.float64)).reshape(2, 4, 1).repeat(3, axis=2)
+    x[0, 0] = BLACK                                                    # unseen
+    up = resample(x, (4, 8))
+    assert up.shape == (4, 8, 3)
+    np.testing.assert_array_equal(up[2:, 6:], np.full((2, 2, 3), x[1, 3, 0]))    # each texel covers 2 x 2
+    np.testing.assert_array_equal(up[:2, :2], np.full((2, 2, 3), x[0, 1, 0]))    # unseen: darkest seen value
+    np.testing.assert_array_equal(resample(up, (2, 4))[1], x[1])

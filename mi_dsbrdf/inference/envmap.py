@@ -22,7 +22,10 @@ illumination block and a short reflectance block; the best starts the rounds.
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
 channels: the grey-world assumption), then colour from that start, unless the
-image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides).
+image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides). Coarse to
+fine (:func:`map_sizes`, ``Config.map_levels``): the start runs on the map at a
+quarter of its resolution, the grey pass at half, the colour pass at full; the
+map moves up by :func:`resample`.
 """
 from __future__ import annotations
 
@@ -31,6 +34,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
+from mi_dsbrdf.backend import single_blas_thread
 from mi_dsbrdf.brdf.chromaticity import softmax_chroma
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
@@ -49,6 +53,7 @@ def start_iters(iters) -> int:
     return max(int(iters * START_FRACTION), START_MIN_ITERS)
 
 
+@single_blas_thread
 def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = None, colour=True,
                    progress=None) -> Recovery:
     """MAP estimate of the material and the illumination map of one image.
@@ -64,8 +69,16 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     progress : called with each logged row
     """
     cfg = config or Config()
-    post = Posterior(texels, observed, mask, model, cfg)
-    H, W = cfg.map_size
+    passes = ["grey", "colour"] if colour else ["grey"]
+    sizes = map_sizes(cfg.map_size, cfg.map_levels, len(passes))
+    posteriors = {}
+
+    def posterior(size):
+        if size not in posteriors:
+            posteriors[size] = Posterior(texels.with_map_size(size), observed, mask, model, cfg)
+        return posteriors[size]
+
+    post = posterior(sizes[0])
     logits0 = random_chroma_logits(cfg, post.R)
     rows = []
     t0 = time.perf_counter()
@@ -75,10 +88,11 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         if progress:
             progress(rows[-1])
 
-    # start: each reflectance start with the constant map that matches the image's
-    # median level, refined by one grey illumination block and one reflectance
-    # block; the best posterior starts the alternation
+    # start (on the coarsest map): each reflectance start with the constant map that
+    # matches the image's median level, refined by one grey illumination block and
+    # one reflectance block; the best posterior starts the alternation
     best = None
+    H, W = sizes[0]
     for p0 in reflectance_starts(model):
         T = post.transport(p0, logits0)
         seen = ~unseen_texels(T).reshape(H, W)
@@ -89,12 +103,15 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
         step = reflectance_block(post, p0, logits0, L, start_iters(cfg.block_iters), fit_scale=True)
         value = post.reflectance_terms(step.psi, step.logits, step.L)[0]
-        log({"pass": "start", "round": len(rows), "neg_log_posterior": value})
+        log({"pass": "start", "round": len(rows), "neg_log_posterior": value, "map_size": list(sizes[0])})
         if best is None or value < best[0]:
-            best = (value, step.psi, step.logits, x + float(np.log(step.L.max() / L.max())))
+            best = (value, step.psi, step.logits, np.where(seen[..., None], x, BLACK) + float(np.log(step.L.max() / L.max())))
     _, psi, logits, log_map = best
-    T = post.transport(psi, logits)
-    for pass_name in (["grey", "colour"] if colour else ["grey"]):
+    for pass_name, size in zip(passes, sizes[1:]):
+        post = posterior(size)
+        H, W = size
+        log_map = resample(log_map, size)
+        T = post.transport(psi, logits)
         prev = None
         for rnd in range(cfg.max_rounds):
             # illumination block (T from the current reflectance)
@@ -112,7 +129,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             terms = post.prior_terms(psi, logits, log_map, bins)
             total = lik + sum(terms.values())
             log({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik, **terms,
-                 "unseen_texels": int((~seen).sum())})
+                 "unseen_texels": int((~seen).sum()), "map_size": [H, W]})
             if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
                 break
             prev = total
@@ -120,6 +137,31 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map), 0.0), seen=seen,
                     log=rows)
+
+
+def map_sizes(map_size, levels, n_passes) -> list:
+    """Map sizes (H, W) of the start and of each pass, coarse to fine: the start on
+    ``map_size`` halved ``levels - 1`` times, pass i of n on it halved
+    min(n - 1 - i, levels - 1) times (the last pass on ``map_size`` itself); never
+    below 2 x 4. A coarse map has fewer unknowns and a smaller transport, and the
+    start and the grey pass need the light's layout, not its detail."""
+    H, W = map_size
+    def halved(n):
+        return max(H >> n, 2), max(W >> n, 4)
+    return [halved(levels - 1)] + [halved(min(n_passes - 1 - i, levels - 1)) for i in range(n_passes)]
+
+
+def resample(log_map, size) -> np.ndarray:
+    """The log map (h, w, 3) on ``size`` (H, W) texels, each new texel taking the
+    value of the old texel its centre falls in; unseen (BLACK) texels take the
+    darkest seen value first, so that a texel seen only at the finer size starts lit."""
+    h, w, _ = log_map.shape
+    H, W = size
+    seen = log_map > BLACK
+    x = np.where(seen, log_map, log_map[seen].min() if seen.any() else 0.0)
+    rows = ((np.arange(H) + 0.5) * h / H).astype(np.int64)
+    cols = ((np.arange(W) + 0.5) * w / W).astype(np.int64)
+    return x[rows][:, cols]
 
 
 def illumination_block(post, log_map, T, seen, bins, grey, iters) -> np.ndarray:

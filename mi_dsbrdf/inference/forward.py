@@ -61,17 +61,27 @@ class TexelSum:
         self.frames = tuple(np.array(v, dtype=np.float64) for v in (self.si.sh_frame.s, self.si.sh_frame.t,
                                                                     self.si.sh_frame.n, self.si.wi))
         self.bsdf = shape.bsdf()
-        H, W = map_size
+        self._scene, self._trace = scene, visibility
+        self._to_world = None if to_world is None else np.asarray(to_world, dtype=np.float64)[:3, :3]
+        self._map(map_size)
+
+    def _map(self, map_size):
+        H, W = (int(v) for v in map_size)
         self.map_size = (H, W)
         d = latlong_directions(H, W).reshape(-1, 3)
-        if to_world is not None:
-            d = d @ np.asarray(to_world, dtype=np.float64)[:3, :3].T
+        if self._to_world is not None:
+            d = d @ self._to_world.T
             d /= np.linalg.norm(d, axis=1, keepdims=True)
-        self._scene, self._trace = scene, visibility
         self._light(d, texel_solid_angles(H, W).reshape(-1), None)
 
     # A TexelSum is never changed once made: a new light, BSDF or pixel subset
     # is a new (shallow) copy that shares the geometry.
+    def with_map_size(self, map_size) -> "TexelSum":
+        """This view under an illumination map of ``map_size`` (H, W) texels."""
+        out = copy.copy(self)
+        out._map(map_size)
+        return out
+
     def with_directions(self, directions, solid_angles) -> "TexelSum":
         """This view lit from the world directions (T, 3) with solid angles (T,)
         instead of the map's texels: one direction with solid angle 1 makes the

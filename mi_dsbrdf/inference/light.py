@@ -18,6 +18,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
+from mi_dsbrdf.backend import single_blas_thread
 from mi_dsbrdf.brdf.chromaticity import softmax_chroma
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
@@ -36,9 +37,13 @@ SEARCH_POWELL_EVALS, POWELL_EVALS = 100, 400
 
 
 def light_likelihood(post, material, theta, phi, log_intensity) -> float:
-    """Eq. 19 of the image of ``material`` under a light from (theta, phi) of this log intensity."""
+    """Eq. 19 of the image of ``material`` under a light from (theta, phi) of this
+    log intensity, over the reflectance block's evenly spread pixels (scaled to
+    stand for all): the light has 3 unknowns, and this is Powell's inner loop."""
     post.aim(theta, phi)
-    return post.likelihood(post.view.render(material, np.full((1, 3), np.exp(log_intensity))))
+    v = post.refl
+    return post.likelihood(v.lobes.render(material, np.full((1, 3), np.exp(log_intensity))), v.observed,
+                           v.keep) * v.weight
 
 
 def light_block(post, material, theta, phi, log_intensity, maxfev=POWELL_EVALS) -> tuple:
@@ -69,10 +74,11 @@ def matched_log_intensity(post, material, theta, phi):
     """Log intensity that matches the median observed level of the pixels a light
     from (theta, phi) reaches under ``material``; None if it reaches none."""
     post.aim(theta, phi)
-    lit = post.view.render(material, np.ones((1, 3))).mean(axis=1)[post.keep]
+    v = post.refl
+    lit = v.lobes.render(material, np.ones((1, 3))).mean(axis=1)[v.keep]
     if not np.any(lit > 0):
         return None
-    ratio = np.median(post.observed[post.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
+    ratio = np.median(v.observed[v.keep].mean(axis=1)[lit > 0]) / np.median(lit[lit > 0])
     return float(np.log(ratio)) if ratio > 0 else None
 
 
@@ -89,6 +95,7 @@ def highlight_lights(post) -> list:
     return [angles_from_direction(n), angles_from_direction(mirror)]
 
 
+@single_blas_thread
 def recover_light(texels: TexelSum, observed, mask, model, config: Config = None, progress=None,
                   known_light=None, point=None) -> Recovery:
     """MAP estimate of the material and a directional or point light.

@@ -25,6 +25,7 @@ runs it on a GPU); the BLAS products run on the CPU.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import drjit as dr
 import mitsuba as mi
@@ -58,7 +59,12 @@ class LobeSum:
     def __init__(self, texels: TexelSum):
         self.texels = texels
         self.n_pixels, self.n_texels = texels.n_pixels, texels.n_texels
-        self.log_cos_h, self.theta_d, self.weight = texels.pair_geometry()
+
+    @functools.cached_property
+    def geometry(self) -> tuple:
+        """(log cos theta_h, theta_d, weight) of every pair (computed on first use:
+        a light search re-aims views it never renders)."""
+        return self.texels.pair_geometry()
 
     def subset(self, rows) -> "LobeSum":
         """The same view restricted to the pixels ``texels.pixels[rows]``."""
@@ -77,7 +83,7 @@ class LobeSum:
         for p0 in range(0, self.n_pixels, step):
             p1 = min(p0 + step, self.n_pixels)
             lanes = dr.arange(mi.UInt32, p0 * self.n_texels, p1 * self.n_texels)
-            yield p0, p1, [dr.gather(mi.Float, a, lanes) for a in (self.log_cos_h, self.theta_d, self.weight)]
+            yield p0, p1, [dr.gather(mi.Float, a, lanes) for a in self.geometry]
 
     @staticmethod
     def _scalars(material):
@@ -132,11 +138,14 @@ class LobeSum:
                 d_kappa, d_gamma = e * u, (e * k) * (x * ex)
                 cols += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
             dr.eval(*cols)
-            A = np.stack([c.numpy().reshape(p1 - p0, self.n_texels) for c in cols])
-            sums[:, :, p0:p1] = (A.reshape(-1, self.n_texels) @ L).reshape(R, 1 + 2 * N_CONTROL, p1 - p0, 3)
+            flat = sums[:, :, p0:p1].reshape(R * (1 + 2 * N_CONTROL), p1 - p0, 3)
+            for j, c in enumerate(cols):
+                flat[j] = c.numpy().reshape(p1 - p0, self.n_texels) @ L
+            sums[:, :, p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, p1 - p0, 3)
         sums *= s
         c = material.chromaticity                                   # (R, 3)
-        image = np.einsum("rc,rpc->pc", c, sums[:, 0])
-        d_ctrl = np.einsum("rc,rjpc->pcrj", c, sums[:, 1:]).reshape(self.n_pixels, 3, R, 2, N_CONTROL)
+        image = (sums[:, 0] * c[:, None, :]).sum(axis=0)
+        d_ctrl = sums[:, 1:] * c[:, None, None, :]                  # (R, 12, P, 3)
+        d_ctrl = np.ascontiguousarray(d_ctrl.transpose(2, 3, 0, 1)).reshape(self.n_pixels, 3, R, 2, N_CONTROL)
         d_chroma = np.transpose(sums[:, 0], (1, 2, 0))              # (P, 3, R)
         return LobeJacobian(image, d_ctrl, d_chroma)

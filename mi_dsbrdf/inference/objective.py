@@ -33,8 +33,9 @@ from mi_dsbrdf.inference.likelihood import LOG_OFFSET, log_likelihood_terms
 CURVE_MARGIN = 1.0
 #: weight of the squared excess (log units) of a control value beyond that range
 CURVE_PENALTY = 100.0
-#: the fewest pixels the reflectance block works on, however large the map
-MIN_REFLECTANCE_PIXELS = 64
+#: the fewest and the most pixels the reflectance block works on (16 + 6 variables:
+#: a few thousand pixels, evenly spread, constrain them as well as all of them do)
+MIN_REFLECTANCE_PIXELS, MAX_REFLECTANCE_PIXELS = 64, 2048
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,7 +86,8 @@ class Posterior:
         # the reflectance block's pixels: an evenly spread subset, its likelihood
         # scaled up to stand for all usable pixels
         usable = np.nonzero(keep)[0]
-        n_sub = max(MIN_REFLECTANCE_PIXELS, config.reflectance_pairs // max(texels.n_texels, 1))
+        n_sub = int(np.clip(config.reflectance_pairs // max(texels.n_texels, 1), MIN_REFLECTANCE_PIXELS,
+                            MAX_REFLECTANCE_PIXELS))
         if usable.size > n_sub:
             rows = usable[np.linspace(0, usable.size - 1, n_sub).round().astype(np.int64)]
             self.refl = PixelView(self.view.subset(rows), obs[rows], np.ones(rows.size, bool),

@@ -67,7 +67,8 @@ def psi_jacobian(basis, psi, controls_jacobian) -> np.ndarray:
     bases psi (Eq. 2-3), then clamped, and a clamped one does not move."""
     ctrl = basis.control_values(psi)
     free = np.stack(passed_through(ctrl[:, 0], ctrl[:, 1]), axis=1)             # (R, 2, 6)
-    return np.einsum("pcrjm,irjm->pci", controls_jacobian, basis.bases * free)
+    P = controls_jacobian.shape[0]
+    return (controls_jacobian.reshape(P * 3, -1) @ (basis.bases * free).reshape(basis.n_bases, -1).T).reshape(P, 3, -1)
 
 
 def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None) -> ReflectanceStep:
