@@ -7,9 +7,9 @@ the scene, the radiant intensity in W/sr. A wrong reflectance biases the light
 and the other way round, so the search starts globally (:func:`recover_light`):
 the best few of 64 directions under the mean material, and the directions the
 brightest pixel suggests, each get a short reflectance fit and a coarse Powell
-refinement; the best posterior starts the alternation of Powell's method on the
-light (:func:`light_block`) and the reflectance block with the light refined
-jointly.
+refinement; the best posterior starts the alternation: Powell's method on the
+light (:func:`light_block`) and the reflectance block from every start, then
+rounds of the reflectance block with the light refined jointly.
 """
 from __future__ import annotations
 
@@ -149,7 +149,9 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         log_i = float(np.log(known_light[1]))
     prev = None
     for rnd in range(cfg.max_rounds):
-        if known_light is None:
+        if known_light is None and rnd == 0:
+            # Powell on the light; from the second round on, the reflectance block
+            # refines the direction and the scale jointly with the material
             theta, phi, log_i = light_block(post, post.material(psi, logits), theta, phi, log_i)
         L = np.full((1, 3), np.exp(log_i))
         post.aim(theta, phi)

@@ -80,6 +80,9 @@ class LobeSum:
     def _rows(self):
         """Pixel ranges [p0, p1) of at most CHUNK pairs, and their lanes."""
         step = max(1, CHUNK // max(self.n_texels, 1))
+        if step >= self.n_pixels:
+            yield 0, self.n_pixels, self.geometry
+            return
         for p0 in range(0, self.n_pixels, step):
             p1 = min(p0 + step, self.n_pixels)
             lanes = dr.arange(mi.UInt32, p0 * self.n_texels, p1 * self.n_texels)
@@ -138,9 +141,11 @@ class LobeSum:
                 d_kappa, d_gamma = e * u, (e * k) * (x * ex)
                 cols += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
             dr.eval(*cols)
-            flat = sums[:, :, p0:p1].reshape(R * (1 + 2 * N_CONTROL), p1 - p0, 3)
-            for j, c in enumerate(cols):
-                flat[j] = c.numpy().reshape(p1 - p0, self.n_texels) @ L
+            A = [c.numpy().reshape(p1 - p0, self.n_texels) for c in cols]
+            if self.n_texels == 1:                  # one light: the sum over texels is a product
+                flat = np.stack(A)[:, :, 0, None] * L[0]
+            else:
+                flat = np.stack([a @ L for a in A])
             sums[:, :, p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, p1 - p0, 3)
         sums *= s
         c = material.chromaticity                                   # (R, 3)
