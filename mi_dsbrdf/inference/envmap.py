@@ -22,10 +22,9 @@ illumination block and a short reflectance block; the best starts the rounds.
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
 channels: the grey-world assumption), then colour from that start, unless the
-image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides). Coarse to
-fine (:func:`map_sizes`, ``Config.map_levels``): the start runs on the map at a
-quarter of its resolution, the grey pass at half, the colour pass at full; the
-map moves up by :func:`resample`.
+image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides). The start runs
+on the map at half its resolution (:func:`map_sizes`,
+``Config.map_levels``); its map moves up by :func:`resample`.
 """
 from __future__ import annotations
 
@@ -38,7 +37,7 @@ from mi_dsbrdf.backend import single_blas_thread
 from mi_dsbrdf.brdf.chromaticity import softmax_chroma
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.inference.forward import TexelSum, unseen_texels
+from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
 from mi_dsbrdf.inference.reflectance import random_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
@@ -95,7 +94,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     H, W = sizes[0]
     for p0 in reflectance_starts(model):
         T = post.transport(p0, logits0)
-        seen = ~unseen_texels(T).reshape(H, W)
+        seen = ~post.view.unseen.reshape(H, W)
         level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
         x = np.full((H, W, 3), np.log(max(level, 1e-12)))
         bins = post.entropy.bins_for(x)
@@ -115,21 +114,25 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         prev = None
         for rnd in range(cfg.max_rounds):
             # illumination block (T from the current reflectance)
-            seen = ~unseen_texels(T).reshape(H, W)
+            seen = ~post.view.unseen.reshape(H, W)
             bins = post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
             log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
             L = np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3)
-            # reflectance block, with the map's overall scale
+            kept = posterior_at(post, psi, logits, log_map, T, seen, bins)
+            # reflectance block, with the map's overall scale, over a subset of the
+            # pixels: kept only if the posterior over all of them falls too (a step
+            # that fits the subset can ruin the rest: a red fabric under ennis went
+            # from 7.6e3 to 4.9e5 that way)
             step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True)
-            psi, logits = step.psi, step.logits
-            log_map = log_map + float(np.log(step.L.max() / L.max()))
-            # the full posterior at the new point; its T serves the next illumination block
-            T = post.transport(psi, logits)
-            lik = post.map_likelihood(log_map, T, seen, grad=False)[0]
-            terms = post.prior_terms(psi, logits, log_map, bins)
-            total = lik + sum(terms.values())
+            new_map = log_map + float(np.log(step.L.max() / L.max()))
+            new_T = post.transport(step.psi, step.logits)   # serves the next illumination block
+            new = posterior_at(post, step.psi, step.logits, new_map, new_T, seen, bins)
+            rejected = not new[0] <= kept[0]
+            if not rejected:
+                psi, logits, log_map, T, kept = step.psi, step.logits, new_map, new_T, new
+            total, lik, terms = kept
             log({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik, **terms,
-                 "unseen_texels": int((~seen).sum()), "map_size": [H, W]})
+                 "unseen_texels": int((~seen).sum()), "map_size": [H, W], "reflectance_step_rejected": rejected})
             if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
                 break
             prev = total
@@ -139,16 +142,25 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                     log=rows)
 
 
+def posterior_at(post, psi, logits, log_map, T, seen, bins) -> tuple:
+    """(negative log posterior, likelihood, prior terms) of the whole image at a
+    material whose transport is ``T`` and the log map (unseen texels black)."""
+    lik = post.map_likelihood(log_map, T, seen, grad=False)[0]
+    terms = post.prior_terms(psi, logits, log_map, bins)
+    return lik + sum(terms.values()), lik, terms
+
+
 def map_sizes(map_size, levels, n_passes) -> list:
-    """Map sizes (H, W) of the start and of each pass, coarse to fine: the start on
-    ``map_size`` halved ``levels - 1`` times, pass i of n on it halved
-    min(n - 1 - i, levels - 1) times (the last pass on ``map_size`` itself); never
-    below 2 x 4. A coarse map has fewer unknowns and a smaller transport, and the
-    start and the grey pass need the light's layout, not its detail."""
+    """Map sizes (H, W) of the start and of each pass: the start on ``map_size``
+    halved ``levels - 1`` times (never below 2 x 4), every pass on ``map_size``.
+    The start only chooses among the reflectance starts, and a coarse map has fewer
+    unknowns and a smaller transport. The passes do not run coarse: a lobe sharper
+    than the texel spacing hides between texel centres, and a grey pass at half
+    resolution settled on such spikes, which the full map then exposed (a red
+    fabric under ennis relit with error 0.7 instead of 0.1)."""
     H, W = map_size
-    def halved(n):
-        return max(H >> n, 2), max(W >> n, 4)
-    return [halved(levels - 1)] + [halved(min(n_passes - 1 - i, levels - 1)) for i in range(n_passes)]
+    start = (max(H >> (levels - 1), 2), max(W >> (levels - 1), 4))
+    return [start] + [(H, W)] * n_passes
 
 
 def resample(log_map, size) -> np.ndarray:

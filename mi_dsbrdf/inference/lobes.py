@@ -33,7 +33,11 @@ import numpy as np
 
 from mi_dsbrdf.brdf.curves import N_CONTROL, spline_basis
 from mi_dsbrdf.brdf.dsbrdf import LOG_COS_H_MIN, lobe_curves, lobe_rgb, lobe_value
-from mi_dsbrdf.inference.forward import CHUNK, TexelSum, apply_transport, unit_scaled
+from mi_dsbrdf.inference.forward import TexelSum, apply_transport, unit_scaled
+
+#: pairs per kernel launch: the transport writes 3 floats a pair (a 128x128 sphere
+#: under a 32x64 map, 24.5M pairs, in one launch), the Jacobian 39
+VALUE_CHUNK, JACOBIAN_CHUNK = 1 << 25, 1 << 22
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,6 +70,15 @@ class LobeSum:
         a light search re-aims views it never renders)."""
         return self.texels.pair_geometry()
 
+    @functools.cached_property
+    def unseen(self) -> np.ndarray:
+        """(T,) bool: texels no observed pixel can receive light from, whatever the
+        material: below every pixel's horizon, or blocked. (A test on the transport
+        instead, relative to its largest entry, hid most of a map behind one sharp
+        lobe's peak.)"""
+        w = self.geometry[2].numpy().reshape(self.n_pixels, self.n_texels)
+        return ~(w > 0).any(axis=0)
+
     def subset(self, rows) -> "LobeSum":
         """The same view restricted to the pixels ``texels.pixels[rows]``."""
         return LobeSum(self.texels.subset(rows))
@@ -77,9 +90,9 @@ class LobeSum:
         return LobeSum(self.texels.with_directions(directions, solid_angles))
 
     # --- kernels -----------------------------------------------------------------
-    def _rows(self):
-        """Pixel ranges [p0, p1) of at most CHUNK pairs, and their lanes."""
-        step = max(1, CHUNK // max(self.n_texels, 1))
+    def _rows(self, chunk):
+        """Pixel ranges [p0, p1) of at most ``chunk`` pairs, and their geometry."""
+        step = max(1, chunk // max(self.n_texels, 1))
         if step >= self.n_pixels:
             yield 0, self.n_pixels, self.geometry
             return
@@ -105,7 +118,7 @@ class LobeSum:
     def _channels(self, material, out):
         """Fill ``out`` (3, P, T) with weight * Eq. 4 per colour channel."""
         lk, lg, ch = self._scalars(material)
-        for p0, p1, (lc, td, w) in self._rows():
+        for p0, p1, (lc, td, w) in self._rows(VALUE_CHUNK):
             rgb = [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
             dr.eval(*rgb)
             for c in range(3):
@@ -128,7 +141,7 @@ class LobeSum:
         R = material.n_lobes
         L, s = unit_scaled(illumination)
         sums = np.empty((R, 1 + 2 * N_CONTROL, self.n_pixels, 3))
-        for p0, p1, (lc, td, w) in self._rows():
+        for p0, p1, (lc, td, w) in self._rows(JACOBIAN_CHUNK):
             basis = spline_basis(td, material.knots)
             kappa, gamma = lobe_curves(td, lk, lg, material.knots)
             cols = []
