@@ -79,6 +79,7 @@ def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
     rs = [json.load(open(f)) for f in sorted(glob.glob(os.path.join(results_dir, "*.json")))]
     pairs = sorted({(r["case"]["material"], r["case"]["probe"]) for r in rs})
     fig, axes = plt.subplots(len(MEASURES), len(pairs), figsize=(2.6 * len(pairs), 2.3 * len(MEASURES)),
@@ -93,6 +94,9 @@ def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
                 ax.plot([r["seconds"] for r in sel], [error(r, key) for r in sel], "o-", ms=3,
                         color=COLOURS[method], label=method)
             ax.set_xscale("log")
+            ax.xaxis.set_major_formatter(ScalarFormatter())
+            ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.set_xticks([5, 10, 20, 40])
             ax.tick_params(labelsize=6)
             if i == 0:
                 ax.set_title("%s\n%s" % (m, os.path.splitext(os.path.basename(p))[0]), fontsize=7)

@@ -7,10 +7,10 @@ Groups of cases (:func:`cases`; each case is run and scored by
   (``--full``: 0, 30, 60, 90, 120 and every material), with and without priors (§6.1);
 * probe: MERL materials x real light probes, with and without priors (§6.2);
 * stiff: chrome (mirror-like), pink felt (near-Lambertian), a light at 120 deg
-  (mostly unlit), a sun thousands of times brighter than its sky, a torus (non-convex);
-* budget: one material under one probe at several budgets (rounds/iterations,
-  map resolution) and the Monte Carlo alternatives (``dsbrdf-adam``,
-  ``principled-adam``: Adam through ``prb`` at several spp and iterations).
+  (mostly unlit), a sun thousands of times brighter than its sky, a torus (non-convex).
+
+Error against run time, beside Adam through ``prb``, is ``benchmarks/error_vs_time.py``
+(it builds its cases with :func:`make_case`, group ``budget``).
 
 Resumable: each case writes ``<out>/<id>.json`` (and ``<id>.npz``, its relit
 images) when it finishes, and a rerun skips the cases whose file exists.
@@ -82,16 +82,6 @@ def cases(full=False, materials=None) -> list:
             make_case("stiff", "point", "gold-metallic-paint", angle=120),
             make_case("stiff", "probe", "gold-metallic-paint", probe=SUN_PROBE),
             make_case("stiff", "probe", "blue-acrylic", probe=grace, shape="torus")]
-    b = dict(probe=grace)
-    m = "gold-metallic-paint"
-    out += [make_case("budget", "probe", m, map=[8, 16], rounds=1, iters=5, **b),
-            make_case("budget", "probe", m, map=[16, 32], rounds=2, iters=10, **b),
-            make_case("budget", "probe", m, map=[32, 64], rounds=3, iters=15, **b),
-            make_case("budget", "probe", m, map=[32, 64], rounds=6, iters=30, **b)]
-    for spp, iters in ((4, 100), (16, 100), (16, 300)):
-        out.append(make_case("budget", "probe", m, False, method="principled-adam", spp=spp, iters=iters, **b))
-    for spp, iters in ((4, 100), (16, 200)):
-        out.append(make_case("budget", "probe", m, False, method="dsbrdf-adam", spp=spp, iters=iters, **b))
     ids = [c["id"] for c in out]
     assert len(ids) == len(set(ids)), "case ids must be unique"
     return out
@@ -171,7 +161,7 @@ def run_on_cluster(todo, out, data=DATA, workers=2, scheduler=None, cache=CACHE)
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--full", action="store_true", help="every MERL material, angle and probe")
-    ap.add_argument("--groups", nargs="*", choices=["point", "probe", "stiff", "budget"])
+    ap.add_argument("--groups", nargs="*", choices=["point", "probe", "stiff"])
     ap.add_argument("--materials", nargs="*", help="materials of the point and probe groups")
     ap.add_argument("--workers", type=int, default=2, help="local worker processes (one thread each)")
     ap.add_argument("--scheduler", help="address of a Dask scheduler (default: a local cluster)")
