@@ -87,7 +87,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         if progress:
             progress(rows[-1])
 
-    # start (on the coarsest map): each reflectance start with the constant map that
+    # start (on the coarse map): each reflectance start with the constant map that
     # matches the image's median level, refined by one grey illumination block and
     # one reflectance block; the best posterior starts the alternation
     best = None
@@ -104,7 +104,8 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         value = post.reflectance_terms(step.psi, step.logits, step.L)[0]
         log({"pass": "start", "round": len(rows), "neg_log_posterior": value, "map_size": list(sizes[0])})
         if best is None or value < best[0]:
-            best = (value, step.psi, step.logits, np.where(seen[..., None], x, BLACK) + float(np.log(step.L.max() / L.max())))
+            scale = float(np.log(step.L.max() / L.max()))
+            best = (value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK))
     _, psi, logits, log_map = best
     for pass_name, size in zip(passes, sizes[1:]):
         post = posterior(size)
@@ -157,7 +158,8 @@ def map_sizes(map_size, levels, n_passes) -> list:
     unknowns and a smaller transport. The passes do not run coarse: a lobe sharper
     than the texel spacing hides between texel centres, and a grey pass at half
     resolution settled on such spikes, which the full map then exposed (a red
-    fabric under ennis relit with error 0.7 instead of 0.1)."""
+    fabric under ennis relit with error 17 instead of 0.1); a start at a quarter
+    resolution chose the wrong basin for it (0.7)."""
     H, W = map_size
     start = (max(H >> (levels - 1), 2), max(W >> (levels - 1), 4))
     return [start] + [(H, W)] * n_passes

@@ -57,9 +57,11 @@ class TexelSum:
         self.pixels = np.nonzero(hit)[0]
         idx = mi.UInt32(self.pixels.astype(np.uint32))
         self.si = dr.gather(mi.SurfaceInteraction3f, si, idx)
-        # per pixel: shading frame (s, t, n) and the direction to the camera in it, (3, P) each
+        # per pixel: shading frame (s, t, n), the direction to the camera in it and
+        # the surface point, (3, P) each
         self.frames = tuple(np.array(v, dtype=np.float64) for v in (self.si.sh_frame.s, self.si.sh_frame.t,
                                                                     self.si.sh_frame.n, self.si.wi))
+        self.positions = np.array(self.si.p, dtype=np.float64)
         self.bsdf = shape.bsdf()
         self._scene, self._trace = scene, visibility
         self._to_world = None if to_world is None else np.asarray(to_world, dtype=np.float64)[:3, :3]
@@ -96,7 +98,7 @@ class TexelSum:
         direction and solid angle 1/r^2 differ per pixel, so that its 'radiance'
         is the point light's intensity (W/sr, Mitsuba's ``point`` emitter)."""
         p = np.asarray(position, dtype=np.float64).reshape(3)
-        x = np.array(self.si.p, dtype=np.float64).T
+        x = self.positions.T
         d = p - x
         r2 = np.maximum((d * d).sum(axis=1), 1e-12)
         out = copy.copy(self)
@@ -122,6 +124,7 @@ class TexelSum:
         sub.pixels = self.pixels[rows]
         sub.si = dr.gather(mi.SurfaceInteraction3f, self.si, mi.UInt32(rows.astype(np.uint32)))
         sub.frames = tuple(f[:, rows] for f in self.frames)
+        sub.positions = self.positions[:, rows]
         sub.visibility = None if self.visibility is None else self.visibility[rows]
         if self.light_position is not None:
             sub.directions, sub.solid_angles = self.directions[rows], self.solid_angles[rows]
