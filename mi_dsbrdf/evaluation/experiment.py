@@ -34,6 +34,7 @@ fit is left out of bases and priors) and scores it:
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import time
@@ -103,12 +104,20 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
 
 def loo_model(name, cache):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
-    library from the other 99 fits; cached as ``cache/loo-<name>.npz``)."""
-    path = os.path.join(cache, "loo-%s.npz" % name)
+    library from the other 99 fits; cached as ``cache/loo-<name>-<h>.npz``, h
+    the first 12 hex digits of the shipped model file's SHA-256, so that a rebuilt
+    model never reuses a leave-one-out model of the one before)."""
+    path = os.path.join(cache, "loo-%s-%s.npz" % (name, shipped_model_hash()))
     if not os.path.exists(path):
         fits = stored_fits(model_data.shipped_model().arrays)
         save_model(path, build_from_fits(fits, exclude=[name], refit=False, progress=False))    # atomic
     return model_data.load_model(path)
+
+
+def shipped_model_hash() -> str:
+    """First 12 hex digits of the SHA-256 of the shipped model file."""
+    with open(model_data.SHIPPED, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()[:12]
 
 
 def specularity(name) -> float:
