@@ -3,7 +3,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.inference.forward import TexelSum, unseen_texels
+from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.latlong import latlong_directions
 
 PSI = np.array([0.5, -0.3, 0.2, 0, 0, 0, 0, 0, 0, 0.1])
@@ -49,7 +50,7 @@ def test_texel_sum_matches_monte_carlo_render():
     T = ts.transport()
     assert T.shape == (3, ts.n_pixels, 512) and np.all(T >= 0)
     # texels straight behind the sphere light no visible point: unseen; none in front is
-    unseen = unseen_texels(T)
+    unseen = LobeSum(ts).unseen
     d = latlong_directions(16, 32).reshape(-1, 3)
     assert unseen.any() and np.all(d[unseen, 2] < 0) and not unseen[d[:, 2] > 0].any()
 

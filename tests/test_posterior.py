@@ -87,7 +87,7 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences():
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.inference.objective import Posterior
     from mi_dsbrdf.model import model_file as model_data
-    from mi_dsbrdf.inference.forward import TexelSum, unseen_texels
+    from mi_dsbrdf.inference.forward import TexelSum
     from mi_dsbrdf.inference.latlong import procedural_sky
     from mi_dsbrdf.app.scenes import sphere_scene
     s = sphere_scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, 12)
@@ -97,7 +97,7 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences():
     post = Posterior(ts, observed.reshape(12, 12, 3), ts.mask, model_data.shipped_model(),
                                Config(map_size=(4, 8)))
     T = post.transport(np.zeros(post.k), np.zeros((post.R, 2)))
-    seen = ~unseen_texels(T).reshape(4, 8)
+    seen = ~post.view.unseen.reshape(4, 8)
     x = np.log(procedural_sky(4, 8).astype(np.float64)) + np.random.default_rng(1).normal(0, 0.3, (4, 8, 3))
     bins = post.entropy.bins_for(x)
     v, g, lik = post.illumination_terms(x, T, seen, bins)

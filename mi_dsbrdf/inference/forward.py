@@ -269,16 +269,6 @@ def unit_scaled(values) -> tuple:
     return (v / s).astype(np.float32), s
 
 
-def unseen_texels(transport, threshold=1e-6) -> np.ndarray:
-    """(T,) bool: texels whose light reaches no observed pixel (left black, reported).
-
-    A texel is unseen when its largest transport weight over all pixels is
-    below ``threshold`` times the largest weight of any texel.
-    """
-    peak = transport.max(axis=(0, 1))
-    return peak <= threshold * max(float(peak.max()), 1e-30)
-
-
 def _forward_columns(partial, variables):
     """Forward-mode derivatives of ``partial`` (a Color3f of P pixels) with respect
     to every entry of every Float in ``variables``: a (P, 3, n) float64 array."""

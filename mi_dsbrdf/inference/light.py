@@ -41,9 +41,7 @@ def light_likelihood(post, material, theta, phi, log_intensity) -> float:
     log intensity, over the reflectance block's evenly spread pixels (scaled to
     stand for all): the light has 3 unknowns, and this is Powell's inner loop."""
     post.aim(theta, phi)
-    v = post.refl
-    return post.likelihood(v.lobes.render(material, np.full((1, 3), np.exp(log_intensity))), v.observed,
-                           v.keep) * v.weight
+    return post.subset_likelihood(material, np.full((1, 3), np.exp(log_intensity)))
 
 
 def light_block(post, material, theta, phi, log_intensity, maxfev=POWELL_EVALS) -> tuple:

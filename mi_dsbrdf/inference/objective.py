@@ -130,9 +130,6 @@ class Posterior:
         """(3, P, T) transport of all pixels under the material (psi, logits)."""
         return self.view.transport(self.material(psi, logits))
 
-    def render(self, psi, logits, L) -> np.ndarray:
-        """(P, 3) radiance of all pixels under the material and the light L (T, 3)."""
-        return self.view.render(self.material(psi, logits), L)
 
     def prior_terms(self, psi, logits, log_map=None, bins=None) -> dict:
         """The weighted prior terms one by one, for the log: the curve penalty, GMM
@@ -163,9 +160,14 @@ class Posterior:
         fixed L, the likelihood over the reflectance block's pixels (``self.refl``),
         no gradients (the block takes its derivatives from
         :meth:`~mi_dsbrdf.inference.lobes.LobeSum.jacobian`)."""
-        v = self.refl
-        lik = self.likelihood(v.lobes.render(self.material(psi, logits), L), v.observed, v.keep) * v.weight
+        lik = self.subset_likelihood(self.material(psi, logits), L)
         return lik + sum(self.prior_terms(psi, logits).values()), lik
+
+    def subset_likelihood(self, material, L) -> float:
+        """Eq. 19 over the reflectance block's pixels (``self.refl``) of ``material``
+        under the light L (T, 3), scaled to stand for all usable pixels."""
+        v = self.refl
+        return self.likelihood(v.lobes.render(material, L), v.observed, v.keep) * v.weight
 
     def likelihood(self, image, observed=None, keep=None) -> float:
         """Eq. 19 of the pixel radiance ``image`` (P, 3) against ``observed``
