@@ -27,7 +27,9 @@ def load(folder) -> dict:
     return {os.path.basename(f)[:-5]: json.load(open(f)) for f in glob.glob(os.path.join(folder, "*.json"))}
 
 
-def value(r, key):
+def measure(r, key):
+    """A result's measure ``key``; ``"relight"``: the mean relit error over its
+    probes; None if the result has no such measure."""
     if key == "relight":
         return float(np.mean(list(r["relight"].values())))
     return r.get(key)
@@ -48,8 +50,8 @@ def report(before, after) -> str:
             continue
         cells = []
         for key, _ in MEASURES:
-            x = [value(a[i], key) for i in sel if value(a[i], key) is not None]
-            y = [value(b[i], key) for i in sel if value(b[i], key) is not None]
+            x = [measure(a[i], key) for i in sel if measure(a[i], key) is not None]
+            y = [measure(b[i], key) for i in sel if measure(b[i], key) is not None]
             cells.append("%.3f → %.3f" % (np.median(x), np.median(y)) if x and y else "–")
         md.append("| %s | %d | %s | %.0f → %.0f |" % (group, len(sel), " | ".join(cells),
                                                       sum(a[i]["seconds"] for i in sel),
@@ -59,7 +61,7 @@ def report(before, after) -> str:
     for i in ids:
         cells = []
         for key, _ in MEASURES:
-            x, y = value(a[i], key), value(b[i], key)
+            x, y = measure(a[i], key), measure(b[i], key)
             cells.append("–" if x is None or y is None else "%.3f → %.3f%s" % (
                 x, y, " **worse**" if y > 1.1 * x + 0.01 else ""))
         md.append("| %s | %s | %.0f → %.0f |" % (i, " | ".join(cells), a[i]["seconds"], b[i]["seconds"]))

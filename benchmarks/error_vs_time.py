@@ -36,6 +36,7 @@ import sys
 
 import numpy as np
 
+from compare_experiments import measure
 from experiments import CACHE, DATA, make_case, run_on_cluster
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -65,7 +66,7 @@ def cases() -> list:
 
 
 def error(r, key) -> float:
-    return float(np.mean(list(r["relight"].values()))) if key == "relight" else float(r[key])
+    return float(measure(r, key))
 
 
 def not_dominated(runs, key) -> list:

@@ -14,6 +14,8 @@ import os
 
 import numpy as np
 
+from compare_experiments import measure
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -103,7 +105,7 @@ def write_report(results_dir, docs_dir) -> str:
                 _median([r.get("brdf_eq20_paper") for r in sel]),
                 _median([r["brdf_eq20_cosine"] for r in sel]),
                 _median([r.get("illumination_error") for r in sel]),
-                _median([np.mean(list(r["relight"].values())) for r in sel])))
+                _median([measure(r, "relight") for r in sel])))
     md.append("")
 
     # --- Fig. 5: sorted error per case ---------------------------------------------------
@@ -235,7 +237,7 @@ def write_report(results_dir, docs_dir) -> str:
             _fmt(r, "brdf_eq5_paper", "%.3f"), _fmt(r, "brdf_eq5_cosine", "%.3f"),
             _fmt(r, "direction_error_deg", "%.2f°"),
             _fmt(r, "illumination_error", "%.3f"),
-            float(np.mean(list(r["relight"].values()))), r["seconds"]))
+            measure(r, "relight"), r["seconds"]))
     path = os.path.join(docs_dir, "experiments.md")
     with open(path, "w") as f:
         f.write("\n".join(md) + "\n")
