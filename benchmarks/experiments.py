@@ -54,8 +54,10 @@ def make_case(group, kind, material, priors=True, **kw) -> dict:
     tag += ["%ddeg" % c["angle"]] if kind == "point" else [os.path.splitext(os.path.basename(c["probe"]))[0]]
     if group == "budget":
         tag += ["%dx%d" % tuple(c["map"])]
-        tag += ["r%d" % c["rounds"], "i%d" % c["iters"]] if c["method"] == "dsbrdf" else \
-            ["i%d" % c["iters"], "spp%d" % c["spp"]]
+        if c["method"] == "dsbrdf":
+            tag += ["r%d" % c["rounds"], "i%d" % c["iters"]]
+        elif c["method"] != "mean-constant":                  # the do-nothing baseline has no budget
+            tag += ["i%d" % c["iters"], "spp%d" % c["spp"]]
     tag += ["priors" if priors else "nopriors"]
     c["id"] = "-".join(tag)
     return c
@@ -91,7 +93,9 @@ def _expected_seconds(c) -> float:
     """A rough cost, to start the long cases first."""
     if c["kind"] == "point":
         return 10.0
-    return c["rounds"] * c["iters"] * c["map"][0] / 8 if c["method"] == "dsbrdf" else c["iters"] * c["spp"] / 40
+    if c["method"] == "dsbrdf":
+        return c["rounds"] * c["iters"] * c["map"][0] / 8
+    return c["iters"] * c.get("spp", 0) / 40
 
 
 def save_result(result: dict, out: str) -> str:

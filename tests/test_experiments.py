@@ -61,6 +61,17 @@ def test_adam_baseline_lowers_its_loss():
         adam_recover(img, ts.mask, 24, (8, 16), "nonsense")
 
 
+def test_the_do_nothing_baseline_is_scored_like_a_method(data, tmp_path):
+    """mean-constant: the (leave-one-out) model's mean material under a constant
+    map, scored with every measure, in no time."""
+    case = tiny({"id": "m", "kind": "probe", "material": "gold-metallic-paint", "probe": "probulator/grace.hdr",
+                 "priors": False, "method": "mean-constant"})
+    r = ev.run_case(case, data, str(tmp_path / "cache"))
+    assert r["finite"] and r["seconds"] == 0.0 and r["rounds"] == 0
+    assert r["illumination_error"] > 0.1           # grace is far from constant
+    assert r["brdf_eq20_paper"] > 0 and r["brdf_eq20_cosine"] > 0 and set(r["relight"]) == {"pisa", "uffizi"}
+
+
 def test_run_case_scores_a_point_light(data, tmp_path):
     case = tiny({"id": "t", "kind": "point", "material": "gold-metallic-paint", "angle": 40, "priors": True})
     r = ev.run_case(case, data, str(tmp_path / "cache"))

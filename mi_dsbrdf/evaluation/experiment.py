@@ -6,7 +6,8 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      "angle": degrees from the viewer (point), "probe": "probulator/grace.hdr" (probe),
      "priors": bool, "weights": {"w_entropy": ..., ...} (optional Config prior
      weights, with priors), "shape": "sphere" | "torus", "res": pixels, "map": [H, W],
-     "rounds": int, "iters": int, "method": "dsbrdf" | "dsbrdf-adam" | "principled-adam",
+     "rounds": int, "iters": int, "method": "dsbrdf" | "dsbrdf-adam" | "principled-adam" | "mean-constant"
+     (probes: the model's mean material under a constant map, the do-nothing baseline),
      "spp": samples per pixel (Adam methods)}
 
 :func:`run_case` renders the truth with the measured material (the ``merl``
@@ -196,7 +197,12 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         truth = downsample(probe, 2 * H, 2 * W)
         ts = texels(merl, res, (2 * H, 2 * W), shape=shape)
         img = render(ts, truth.reshape(-1, 3))
-        if method == "dsbrdf":
+        if method == "mean-constant":
+            # doing nothing: the model's mean material (psi = 0) under a constant map
+            out["seconds"] = 0.0
+            material, rows, seen, recovered_map = model.mean_material(), [], np.ones((H, W), bool), np.ones((H, W, 3))
+            values = material.eval(samples.theta_h, samples.theta_d)
+        elif method == "dsbrdf":
             ts = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)
             result = recover_envmap(ts, img, ts.mask, model, cfg)
             out["seconds"] = time.perf_counter() - t0
