@@ -30,6 +30,11 @@ fit is left out of bases and priors) and scores it:
   recovered material relit under two other probes against the measured
   material under them (paper Fig. 9); the images (truth, recovered at its
   best scale; in units of the truth's mean) are returned for the report;
+  ``relight_psnr``: the same images in the Stanford-ORB convention
+  (:func:`~mi_dsbrdf.evaluation.metrics.relight_psnr`, dB, higher is better);
+* ``baseline``: doing nothing, scored on the same case: the leave-one-out
+  model's mean material (psi = 0) in every BRDF and relighting measure, and for
+  probes a constant map in ``illumination_error`` on the same seen texels;
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
   ``seconds``, and ``finite`` (no NaN/Inf anywhere in the result).
 """
@@ -51,7 +56,8 @@ from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
 from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, log_rmse,
-                                          log_rmse_scale_invariant, scale_invariant_log_error)
+                                          log_rmse_scale_invariant, relight_psnr,
+                                          scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.forward import TexelSum
@@ -178,6 +184,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     weights = case.get("weights", {}) if case.get("priors", True) else NO_PRIORS
     cfg = Config(map_size=(H, W), max_rounds=case.get("rounds", 3), block_iters=case.get("iters", 15), **weights)
     out = {"case": case, "specularity": specularity(name)}
+    small = seen = None           # the truth map at the recovered resolution and its seen texels (probes)
     t0 = time.perf_counter()
     if case["kind"] == "point":
         d_true = light_at(case["angle"])
@@ -218,25 +225,42 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             seen = np.ones((H, W), bool)
         small = downsample(truth, H, W)
         out["illumination_error"] = scale_invariant_log_error(recovered_map, small, seen)
+        out["seen_fraction"] = float(seen.mean())
         maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
     for c in CONVENTIONS:
         out["brdf_eq20_" + c] = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
     out["trace"] = [float(r["neg_log_posterior"]) for r in rows]
     out["rounds"] = len(rows)
-    out["relight"], images = _relight(case, material, merl, data)
+    out["relight"], out["relight_psnr"], images = _relight(case, material, merl, data)
     if case["kind"] == "probe":
         images.update(maps)
+    out["baseline"] = _do_nothing(case, model, samples, merl, data, small, seen)
     out["finite"] = _finite(out)
     out["images"] = images
     return out
 
 
+def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None) -> dict:
+    """The do-nothing baseline's measures on this case: the model's mean material
+    (psi = 0) in Eq. 20 (both conventions) and relit, and a constant map against
+    ``truth_map`` (H, W, 3) on the ``seen`` texels (probes)."""
+    mean = model.mean_material()
+    values = mean.eval(samples.theta_h, samples.theta_d)
+    out = {"brdf_eq20_" + c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
+           for c in CONVENTIONS}
+    out["relight"], out["relight_psnr"], _ = _relight(case, mean, merl, data)
+    if truth_map is not None:
+        out["illumination_error"] = scale_invariant_log_error(np.ones_like(truth_map), truth_map, seen)
+    return out
+
+
 def _relight(case, material, merl, data, res=48, map_hw=(32, 64)):
-    """Relit image errors under two probes other than the case's, and the images
-    (truth, recovered) for the report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
+    """Relit image errors (scale-invariant log error and Stanford-ORB PSNR) under
+    two probes other than the case's, and the images (truth, recovered) for the
+    report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
     probes = [p for p in RELIGHT_PROBES if p != case.get("probe")][:2]
     bsdf = dsbrdf_bsdf(material) if hasattr(material, "log_kappa") else material
-    errors, images = {}, {}
+    errors, psnr, images = {}, {}, {}
     truth_ts = texels(merl, res, map_hw)
     ts = texels(bsdf, res, map_hw)
     for p in probes:
@@ -244,5 +268,6 @@ def _relight(case, material, merl, data, res=48, map_hw=(32, 64)):
         a, b = render(truth_ts, L), render(ts, L)
         key = os.path.splitext(os.path.basename(p))[0]
         errors[key] = scale_invariant_log_error(b, a, truth_ts.mask)
+        psnr[key] = relight_psnr(b, a, truth_ts.mask)
         images[key] = _normalised_pair(a, b, truth_ts.mask)
-    return errors, images
+    return errors, psnr, images

@@ -111,6 +111,19 @@ def scale_invariant_log_error(values, truth, mask) -> float:
                                     "cosine")[0]
 
 
+def relight_psnr(values, truth, mask) -> float:
+    """PSNR (dB) of an HDR image against the truth in the Stanford-ORB convention
+    as we apply it: each channel of ``values`` at its least-squares scale to the
+    truth over ``mask`` (H, W), then 10 log10(peak^2 / MSE) over the masked
+    pixels, the peak being the truth's largest masked value (HDR, no clipping
+    or tone mapping). Higher is better."""
+    t = np.asarray(truth, np.float64)[mask]
+    v = np.asarray(values, np.float64)[mask]
+    s = (t * v).sum(axis=0) / np.maximum((v * v).sum(axis=0), 1e-300)
+    mse = float(np.mean((s * v - t) ** 2))
+    return 10.0 * math.log10(max(float(t.max()), 1e-300) ** 2 / max(mse, 1e-300))
+
+
 def bsdf_values(bsdf, samples) -> np.ndarray:
     """(N, 3) BRDF values (1/sr) of any Mitsuba BSDF at the angles of MERL
     :class:`~mi_dsbrdf.model.samples.Samples` (eval / cos theta_o): scores baselines on
