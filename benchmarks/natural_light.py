@@ -25,6 +25,7 @@ probes) scale-invariant log error and Stanford-ORB PSNR (dB).
 
     .venv/bin/python benchmarks/natural_light.py --set validation            # 12 cases, ~3 min
     .venv/bin/python benchmarks/natural_light.py --set validation --config w_entropy=300 w_gradient=300
+    .venv/bin/python benchmarks/natural_light.py --choose         # the setting Config ships
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~1 h
     .venv/bin/python benchmarks/natural_light.py --set report --summary      # tables from the results
 """
@@ -34,6 +35,7 @@ import argparse
 import glob
 import json
 import os
+import re
 import sys
 
 import numpy as np
@@ -56,21 +58,28 @@ REPORT_MATERIALS = ["light-brown-fabric",
                     "gold-metallic-paint", "red-fabric", "pvc", "pink-felt"]
 REPORT_PROBES = ["probulator/grace.hdr", "probulator/ennis.hdr", "probulator/pisa.hdr", "probulator/uffizi.hdr",
                  "polyhaven/blouberg_sunrise_2_1k.hdr", "polyhaven/venice_sunset_1k.hdr"]
-#: Adam through prb at about this tool's median time on these cases (8 spp)
-ADAM_ITERS, ADAM_SPP = 150, 8
+#: Adam through prb at about this tool's median time on these cases (8 spp; 150
+#: iterations took 12 s on one core at 64x64, this tool's median on the validation
+#: set is 33 s)
+ADAM_ITERS, ADAM_SPP = 400, 8
+#: a measured BRDF whose peak / off-peak ratio is below this is near-Lambertian; its
+#: recovery has no highlight when its ratio is below HIGHLIGHT_LIMIT times the measured one
+NEAR_LAMBERTIAN, HIGHLIGHT_LIMIT = 1.5, 1.5
 #: (key, label, higher is better)
 MEASURES = [("brdf_eq20_paper", "BRDF Eq. 20 paper", False), ("brdf_eq20_cosine", "BRDF Eq. 20 cosine", False),
-            ("illumination_error", "illumination", False), ("relight", "relit", False),
+            ("illumination_error", "illumination log(1 + L)", False),
+            ("illumination_error_paper", "illumination log(L + 1e-6)", False), ("relight", "relit", False),
             ("relight_psnr", "relit PSNR dB", True)]
 assert not set(VALIDATION_MATERIALS) & set(REPORT_MATERIALS)
 assert not set(VALIDATION_PROBES) & set(REPORT_PROBES)
 
 
 def parse_config(items) -> dict:
-    """``["w_entropy=300", "map_levels=1"]`` -> {"w_entropy": 300.0, "map_levels": 1}."""
+    """``["w_entropy=300", "map_levels=1"]`` -> {"w_entropy": 300.0, "map_levels": 1}; the
+    parts of a :func:`setting_name` (``["w_entropy300", "map_levels1"]``) read alike."""
     out = {}
     for item in items or []:
-        k, _, v = item.partition("=")
+        k, v = item.split("=", 1) if "=" in item else re.fullmatch(r"(.*?)(-?[0-9.]+(?:e[-+]?[0-9]+)?)", item).groups()
         out[k] = int(v) if v.lstrip("-").isdigit() else float(v)
     return out
 
@@ -82,15 +91,10 @@ def setting_name(config) -> str:
 def cases(which, config=None, adam=False) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
-    out = []
-    for m in mats:
-        for p in probes:
-            c = make_case(which, "probe", m, True, probe=p, weights=dict(config or {}))
-            out.append(c)
-            if adam:
-                for method in ("principled-adam", "dsbrdf-adam"):
-                    out.append(make_case(which, "probe", m, True, probe=p, method=method, iters=ADAM_ITERS,
-                                         spp=ADAM_SPP))
+    out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {})) for m in mats for p in probes]
+    for method in ("principled-adam", "dsbrdf-adam") if adam else ():      # after this tool's cases
+        out += [make_case(which, "probe", m, True, probe=p, method=method, iters=ADAM_ITERS, spp=ADAM_SPP)
+                for m in mats for p in probes]
     return out
 
 
@@ -113,6 +117,9 @@ def summary(folder) -> str:
     for method, rs in sorted(by_method.items()):
         cells = []
         for key, _, hi in MEASURES:
+            if any(key not in r for r in rs):           # results written before the measure existed
+                cells.append("–")
+                continue
             x = np.array([value(r, key) for r in rs])
             b = np.array([value(r["baseline"], key) for r in rs])
             if hi:
@@ -121,12 +128,64 @@ def summary(folder) -> str:
                 cells.append("%d/%d, %.2f×" % ((x < b).sum(), len(x), np.median(x / b)))
         md.append("| %s | %d | %.1f | %s |" % (method, len(rs), np.median([r["seconds"] for r in rs]),
                                                " | ".join(cells)))
+    md += ["", "Medians over the cases:", "", "| method | " + " | ".join(label for _, label, _ in MEASURES) + " |",
+           "|---|" + "---|" * len(MEASURES)]
+    baseline = ("doing nothing (mean material, constant map)", [r["baseline"] for r in rows
+                                                                 if r["case"]["method"] == "dsbrdf"])
+    for method, rs in sorted(by_method.items()) + [baseline]:
+        md.append("| %s | %s |" % (method, " | ".join(
+            "%.3f" % np.median([value(r, k) for r in rs]) if rs and all(k in r for r in rs) else "–"
+            for k, _, _ in MEASURES)))
+    flat = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN]
+    if flat:
+        ok = sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in flat)
+        md += ["", "Near-Lambertian materials (measured peak / off-peak < %.1f, "
+               ":func:`~mi_dsbrdf.evaluation.metrics.highlight_ratio`): no highlight, i.e. a recovered ratio "
+               "below %.1f× the measured one, in %d of %d cases (the mean material's ratio: %.1f)." % (
+                   NEAR_LAMBERTIAN, HIGHLIGHT_LIMIT, ok, len(flat), flat[0]["baseline"]["highlight_ratio"]), "",
+               "| case | peak / off-peak: recovered | measured |", "|---|---|---|"]
+        md += ["| %s | %.2f | %.2f |" % (r["case"]["id"], r["highlight_ratio"], r["truth_highlight_ratio"])
+               for r in flat]
     md += ["", "| case | seconds | " + " | ".join("%s (nothing)" % label for _, label, _ in MEASURES) + " |",
            "|---|---|" + "---|" * len(MEASURES)]
     for r in sorted(rows, key=lambda r: r["case"]["id"]):
         md.append("| %s | %.0f | %s |" % (r["case"]["id"], r["seconds"], " | ".join(
-            "%.3f (%.3f)" % (value(r, k), value(r["baseline"], k)) for k, _, _ in MEASURES)))
+            "%.3f (%.3f)" % (value(r, k), value(r["baseline"], k)) if k in r else "–" for k, _, _ in MEASURES)))
     return "\n".join(md) + "\n"
+
+
+#: the measures a setting is chosen on (BRDF, illumination and what a user sees)
+CHOICE_MEASURES = ("brdf_eq20_paper", "illumination_error", "relight")
+CHOICE = os.path.join(OUT, "validation_choice.json")
+
+
+def setting_scores(folder) -> dict:
+    """Per measure of CHOICE_MEASURES, the median over the folder's cases of
+    (result / doing nothing) and the fraction of cases below doing nothing;
+    ``score`` is the mean of those medians (lower is better)."""
+    rows = [json.load(open(f)) for f in sorted(glob.glob(os.path.join(folder, "*.json")))]
+    out = {"cases": len(rows), "seconds_median": float(np.median([r["seconds"] for r in rows]))}
+    for key in CHOICE_MEASURES:
+        ratio = np.array([value(r, key) / value(r["baseline"], key) for r in rows])
+        out[key] = {"median_ratio": float(np.median(ratio)), "wins": int((ratio < 1).sum())}
+    out["score"] = float(np.mean([out[k]["median_ratio"] for k in CHOICE_MEASURES]))
+    return out
+
+
+def choose(root=os.path.join(OUT, "validation"), n_cases=None) -> dict:
+    """The validation setting with the lowest score (:func:`setting_scores`) among
+    the complete ones (every validation case run), and every setting's scores."""
+    n_cases = n_cases or len(VALIDATION_MATERIALS) * len(VALIDATION_PROBES)
+    scores = {os.path.basename(d): setting_scores(d) for d in sorted(glob.glob(os.path.join(root, "*")))
+              if os.path.isdir(d)}
+    complete = {k: v for k, v in scores.items() if v["cases"] == n_cases}
+    if not complete:
+        raise SystemExit("no complete validation setting under %s" % root)
+    best = min(complete, key=lambda k: complete[k]["score"])
+    return {"command": "python benchmarks/natural_light.py --choose", "measures": list(CHOICE_MEASURES),
+            "rule": "lowest mean over the measures of the median ratio to doing nothing",
+            "best": best, "best_config": parse_config(best.split("-")) if best != "defaults" else {},
+            "settings": scores}
 
 
 def main(argv=None):
@@ -135,9 +194,23 @@ def main(argv=None):
     ap.add_argument("--config", nargs="*", help="Config overrides, name=value (validation only)")
     ap.add_argument("--adam", action="store_true", help="principled + Adam and DSBRDF + Adam beside")
     ap.add_argument("--summary", action="store_true", help="only print the tables of finished cases")
+    ap.add_argument("--choose", action="store_true",
+                    help="score every validation setting run so far and write the choice to %s" %
+                         os.path.relpath(CHOICE, ROOT))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
+    if args.choose:
+        choice = choose()
+        with open(CHOICE, "w") as f:
+            json.dump(choice, f, indent=1)
+        print("| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
+              + " | score |\n|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 1))
+        for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["score"]):
+            print("| %s | %d | %.0f | %s | %.3f |" % (name, v["cases"], v["seconds_median"], " | ".join(
+                "%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"]))
+        print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
+        return
     config = parse_config(args.config)
     if config and args.set == "report":
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")

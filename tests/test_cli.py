@@ -16,8 +16,9 @@ def test_demo_recovers_and_reports_and_never_overwrites(tmp_path):
     assert main(["demo", "--out", str(out), "--res", "24", "--map-size", "4x8", "--rounds", "1", "--iters", "3",
                  "--spp", "16"]) == 0
     report = json.loads((out / "report.json").read_text())
-    for key in ("brdf_eq20_paper", "brdf_eq20_cosine", "mean_material_eq20_paper", "illumination_log_rmse_after_scale",
-                "relit_log_rmse_after_scale"):
+    for key in ("brdf_eq20_paper", "brdf_eq20_cosine", "mean_material_eq20_paper", "illumination_cosine_after_scale",
+                "illumination_paper_after_scale", "constant_map_cosine_after_scale", "constant_map_paper_after_scale",
+                "relit_log_rmse_after_scale", "mean_material_relit_log_rmse_after_scale"):
         assert math.isfinite(report[key]) and report[key] >= 0, key
     for f in ("report.md", "comparison.png", "observed.exr", "recovered/material.json",
               "recovered/illumination.exr", "recovered/scene.xml"):

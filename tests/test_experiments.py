@@ -39,6 +39,24 @@ def test_metrics_are_scale_invariant_and_detect_errors():
     half[:4] = False             # only the masked texels count
     assert metrics.scale_invariant_log_error(np.where(half[..., None], t, 1e3), t, half) < 1e-6
     assert abs(metrics.direction_error_deg([1, 0, 0], [1, 1, 0]) - 45.0) < 1e-9
+    # the paper-like convention sees what is darker than the mean, the default hardly does
+    dark = t.copy()
+    dark[:, :8] *= 1e-3
+    wrong = dark.copy()
+    wrong[:, :8] *= 30
+    cos, paper = (metrics.scale_invariant_log_error(wrong, dark, seen, c) for c in ("cosine", "paper"))
+    assert paper > 1.0 and cos < 0.05 and metrics.scale_invariant_log_error(5 * dark, dark, seen, "paper") < 1e-5
+    with pytest.raises(ValueError, match="convention"):
+        metrics.scale_invariant_log_error(t, t, seen, "linear")
+
+
+def test_highlight_ratio_tells_a_highlight_from_none():
+    s = samples_from_function(lambda th, td, pd: np.full(th.shape + (3,), 0.3))
+    assert metrics.highlight_ratio(s.values, s.theta_h, s.theta_d) == pytest.approx(1.0)
+    glossy = s.values * (1 + 50 * np.exp(-(s.theta_h / 0.1) ** 2))[:, None]
+    assert metrics.highlight_ratio(glossy, s.theta_h, s.theta_d) > 20
+    with pytest.raises(ValueError, match="no angles"):
+        metrics.highlight_ratio(s.values[:1], s.theta_h[:1] + 1.0, s.theta_d[:1])
 
 
 def test_bsdf_values_of_the_plugin_match_the_material():
@@ -116,37 +134,37 @@ def test_runner_is_resumable_and_the_report_is_written(data, tmp_path):
         assert (docs / "experiments" / name).stat().st_size > 1000
 
 
-def test_prior_tuning_keeps_test_materials_out_and_picks_the_lowest_geometric_mean(tmp_path):
-    import tune_priors
-    cases = tune_priors.tuning_cases()
-    assert not {c["material"] for c in cases} & set(tune_priors.QUICK_MATERIALS)
-    assert len({c["id"] for c in cases}) == len(cases)
-    with pytest.raises(AssertionError):
-        tune_priors.tuning_cases(materials=["pvc"])
-    # fabricated results: setting A has the lower median, B the lower geometric mean
-    eq20 = {"none": [0.5, 0.5, 0.5], "A": [0.1, 0.2, 0.9], "B": [0.05, 0.25, 0.3]}
-    for c in cases:
-        weights = c.get("weights")
-        key = "none" if not c["priors"] else {(1, 1, 1): "A", (30, 300, 300): "B"}.get(
-            (weights["w_entropy"], weights["w_gmm"], weights["w_hue"]))
-        if key is None or c["material"] not in tune_priors.VALIDATION_MATERIALS[:3]:
-            continue
-        i = tune_priors.VALIDATION_MATERIALS.index(c["material"])
-        with open(tmp_path / (c["id"] + ".json"), "w") as f:
-            json.dump({"case": c, "brdf_eq20": eq20[key][i]}, f)
-    r = tune_priors.summarise(str(tmp_path))
-    assert r["median_eq20"]["illumination=1 gmm=1 hue=1"] < r["median_eq20"]["illumination=30 gmm=300 hue=300"]
-    assert r["best"] == "illumination=30 gmm=300 hue=300"
-    assert r["best_weights"] == dict(w_entropy=30, w_gradient=30, w_gmm=300, w_hue=300)
-    assert r["geometric_mean_eq20"]["none"] == pytest.approx(0.5)
+def test_natural_light_choice_scores_settings_against_doing_nothing(tmp_path):
+    """The validation choice: per setting, median ratios to doing nothing; the
+    lowest mean of them wins among the complete settings."""
+    import natural_light
+    assert not set(natural_light.VALIDATION_MATERIALS) & set(natural_light.REPORT_MATERIALS)
+    assert natural_light.parse_config(["w_entropy3000", "w_gradient30000"]) == dict(w_entropy=3000,
+                                                                                  w_gradient=30000)
+    assert natural_light.parse_config(["w_gradient=1e4"]) == dict(w_gradient=1e4)
+    # fabricated results: A halves every measure, B only the BRDF, C is incomplete
+    for name, ratio, n in (("w_gradientA", 0.5, 2), ("w_gradientB", 1.0, 2), ("w_gradientC", 0.1, 1)):
+        os.makedirs(tmp_path / name)
+        for i in range(n):
+            base = {"brdf_eq20_paper": 1.0, "illumination_error": 2.0, "relight": {"pisa": 0.2}}
+            r = {"seconds": 10.0 + i, "baseline": base, "brdf_eq20_paper": 0.5,
+                 "illumination_error": 2.0 * ratio, "relight": {"pisa": 0.2 * ratio}}
+            with open(tmp_path / name / ("%d.json" % i), "w") as f:
+                json.dump(r, f)
+    c = natural_light.choose(str(tmp_path), n_cases=2)
+    assert c["best"] == "w_gradientA" and set(c["settings"]) == {"w_gradientA", "w_gradientB", "w_gradientC"}
+    a = c["settings"]["w_gradientA"]
+    assert a["illumination_error"] == {"median_ratio": 0.5, "wins": 2} and a["score"] == pytest.approx(0.5)
+    assert c["settings"]["w_gradientB"]["score"] == pytest.approx(2.5 / 3)
 
 
-def test_config_defaults_are_the_tuned_prior_weights():
-    """Config's prior weights are the ones the committed sweep chose."""
+def test_config_defaults_are_the_validation_choice():
+    """Config's prior weights are the ones the committed validation sweep chose."""
     from mi_dsbrdf.config import Config
-    import tune_priors
-    with open(tune_priors.RESULT) as f:
-        tuned = json.load(f)
+    import natural_light
+    with open(natural_light.CHOICE) as f:
+        choice = json.load(f)
     cfg = Config()
-    assert {k: getattr(cfg, k) for k in tuned["best_weights"]} == tuned["best_weights"]
-    assert tuned["geometric_mean_eq20"][tuned["best"]] < tuned["geometric_mean_eq20"]["none"]
+    assert {k: getattr(cfg, k) for k in choice["best_config"]} == choice["best_config"]
+    best = choice["settings"][choice["best"]]
+    assert all(best[k]["median_ratio"] < 1 for k in choice["measures"])     # it beats doing nothing

@@ -140,3 +140,18 @@ def test_prior_weights_follow_the_observed_pixel_count():
     b = half_post.prior_terms(psi, logits, x, half_post.entropy.bins_for(x))
     for term in ("gmm", "hue", "entropy", "gradient"):
         assert b[term] == pytest.approx(a[term] * n_half / n_full, rel=1e-9)
+
+
+def test_the_chromaticity_start_is_the_image_colour():
+    from mi_dsbrdf.brdf.chromaticity import softmax_chroma
+    from mi_dsbrdf.inference.reflectance import START_GREY_MIX, image_chroma_logits
+    keep = np.ones(50, bool)
+    grey = softmax_chroma(image_chroma_logits(np.full((50, 3), 0.4), keep, 3))
+    np.testing.assert_allclose(grey, 1 / 3, atol=1e-9)          # a grey image starts with grey lobes
+    img = np.tile([0.6, 0.3, 0.1], (50, 1))
+    img[keep.size // 2:] = [9.0, 9.0, 9.0]                       # ignored pixels (a white patch)
+    keep[keep.size // 2:] = False
+    c = softmax_chroma(image_chroma_logits(img, keep, 3))
+    np.testing.assert_allclose(c[0], [0.6, 0.3, 0.1], atol=1e-9)  # the broad lobe: the image's colour
+    np.testing.assert_allclose(c[1:], (1 - START_GREY_MIX) * np.array([0.6, 0.3, 0.1]) + START_GREY_MIX / 3,
+                               atol=1e-9)

@@ -45,11 +45,12 @@ def cmd_render(args):
 
 def cmd_demo(args):
     r = run(args.out, material=args.material, res=args.res, config=_config(args), spp=args.spp, force=args.force)
-    print("demo: %s under a sunsky, recovered in %.0f s: BRDF Eq. 20 paper %.3f (mean material %.3f), "
-          "cosine %.3f (%.3f), relit %.3f -> %s" % (
+    print("demo: %s under a sunsky, recovered in %.0f s (doing nothing in brackets): BRDF Eq. 20 paper %.3f "
+          "(%.3f), cosine %.3f (%.3f), illumination %.3f (%.3f), relit %.3f (%.3f) -> %s" % (
               r["material"], r["recover_seconds"], r["brdf_eq20_paper"], r["mean_material_eq20_paper"],
-              r["brdf_eq20_cosine"], r["mean_material_eq20_cosine"], r["relit_log_rmse_after_scale"],
-              os.path.join(args.out, "report.md")))
+              r["brdf_eq20_cosine"], r["mean_material_eq20_cosine"], r["illumination_cosine_after_scale"],
+              r["constant_map_cosine_after_scale"], r["relit_log_rmse_after_scale"],
+              r["mean_material_relit_log_rmse_after_scale"], os.path.join(args.out, "report.md")))
 
 
 def cmd_build_model(args):

@@ -6,9 +6,10 @@ Runs on what the package ships (no ``../shared``):
    under Mitsuba's ``sunsky`` emitter, rendered by Mitsuba (``direct``);
 2. ``mi-dsbrdf recover`` on that image, with a scene whose envmap is a
    placeholder (the illumination is unknown to it);
-3. report: the BRDF error (Eq. 20, Eq. 5 after the best scale, on the MERL
-   grid), the illumination error after the best scale, the recovered
-   material and the truth relit under a second sky, side by side, as
+3. report: the BRDF error (Eq. 20 on the MERL grid, both conventions), the
+   illumination error after the best scale (both conventions), the recovered
+   material and the truth relit under a second sky, side by side, each beside
+   doing nothing (the model's mean material, a constant map), as
    ``report.md``, ``report.json`` and ``comparison.png``.
 """
 from __future__ import annotations
@@ -114,9 +115,9 @@ def run(out, material="gold-metallic-paint", res=64, config: Config = PRESETS["d
     sky_found = read_image(os.path.join(rec, "illumination.exr"))
     seen = sky_found.mean(axis=2) > 0
     relit = []
-    for name in ("truth", "recovered"):
-        bsdf = ({"type": "dsbrdf", "material": material} if name == "truth"
-                else {"type": "dsbrdf", "filename": os.path.join(rec, "material.json")})
+    # truth, recovered, and doing nothing: the model's mean material (a bare dsbrdf)
+    for bsdf in ({"type": "dsbrdf", "material": material},
+                 {"type": "dsbrdf", "filename": os.path.join(rec, "material.json")}, {"type": "dsbrdf"}):
         p = dict(params, sky=sunsky(RELIGHT_SUN), object={"type": "sphere", "bsdf": bsdf})
         relit.append(np.array(mi.render(mi.load_dict(p), spp=spp, seed=1), dtype=np.float64))
     lit = relit[0].mean(axis=2) > 1e-2 * relit[0].mean()
@@ -128,8 +129,12 @@ def run(out, material="gold-metallic-paint", res=64, config: Config = PRESETS["d
               **{"brdf_eq20_%s" % c: e for c, e in brdf_errors(found, truth).items()},
               **{"mean_material_eq20_%s" % c: e
                  for c, e in brdf_errors(shipped_model().mean_material(), truth).items()},
-              "illumination_log_rmse_after_scale": scale_invariant_log_error(sky_found, sky_truth, seen),
+              **{"illumination_%s_after_scale" % c: scale_invariant_log_error(sky_found, sky_truth, seen, c)
+                 for c in ("cosine", "paper")},
+              **{"constant_map_%s_after_scale" % c: scale_invariant_log_error(np.ones_like(sky_truth), sky_truth,
+                                                                               seen, c) for c in ("cosine", "paper")},
               "relit_log_rmse_after_scale": scale_invariant_log_error(relit[1], relit[0], lit),
+              "mean_material_relit_log_rmse_after_scale": scale_invariant_log_error(relit[2], relit[0], lit),
               "unseen_texels": log.get("unseen_texels"), "rounds": len(log["rounds"]),
               "final_neg_log_posterior": log["rounds"][-1]["neg_log_posterior"]}
     with open(os.path.join(out, "report.json"), "w") as f:
@@ -156,8 +161,12 @@ recovered material under that sky (overall scale matched: one image cannot fix i
 | same for the model's mean material (no inference) | {mean_material_eq20_paper:.3f} |
 | BRDF error, Eq. 20 cosine-weighted log(1 + f cos θi), recovered | {brdf_eq20_cosine:.3f} |
 | same for the model's mean material | {mean_material_eq20_cosine:.3f} |
-| illumination log-RMSE after the best scale | {illumination_log_rmse_after_scale:.3f} |
-| relit image log-RMSE after the best scale | {relit_log_rmse_after_scale:.3f} |
+| illumination error after the best scale, log(1 + L / mean), recovered | {illumination_cosine_after_scale:.3f} |
+| same for a constant map on the same texels (no inference) | {constant_map_cosine_after_scale:.3f} |
+| illumination error after the best scale, log(L / mean + 1e-6), recovered | {illumination_paper_after_scale:.3f} |
+| same for a constant map | {constant_map_paper_after_scale:.3f} |
+| relit image log-RMSE after the best scale, recovered | {relit_log_rmse_after_scale:.3f} |
+| same for the model's mean material | {mean_material_relit_log_rmse_after_scale:.3f} |
 | illumination texels no pixel sees (left black) | {unseen_texels} |
 | rounds / final negative log posterior | {rounds} / {final_neg_log_posterior:.4g} |
 

@@ -23,9 +23,13 @@ fit is left out of bases and priors) and scores it:
 * ``brdf_eq5_paper``, ``brdf_eq5_cosine``: Eq. 5 with the known light scale
   (point lights: the BRDF times recovered / true intensity);
 * ``direction_error_deg`` (point lights);
-* ``illumination_error``: the scale-invariant log-RMSE
-  (:func:`~mi_dsbrdf.evaluation.metrics.scale_invariant_log_error`) of the seen texels against the truth
-  map at the recovered resolution (probes);
+* ``highlight_ratio``, ``truth_highlight_ratio``: the recovered and the
+  measured BRDF's peak over off-peak (:func:`~mi_dsbrdf.evaluation.metrics.highlight_ratio`):
+  a near-Lambertian material must not come back with a highlight;
+* ``illumination_error``, ``illumination_error_paper``: the scale-invariant
+  log-RMSE (:func:`~mi_dsbrdf.evaluation.metrics.scale_invariant_log_error`, in
+  its log(1 + L) and its paper-like log(L + 1e-6) convention) of the seen texels
+  against the truth map at the recovered resolution (probes);
 * ``relight``: the same measure (:func:`~mi_dsbrdf.evaluation.metrics.scale_invariant_log_error`) on the
   recovered material relit under two other probes against the measured
   material under them (paper Fig. 9); the images (truth, recovered at its
@@ -55,8 +59,8 @@ from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
-from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, log_rmse,
-                                          log_rmse_scale_invariant, relight_psnr,
+from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
+                                          log_rmse, log_rmse_scale_invariant, relight_psnr,
                                           scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.light import recover_light
@@ -225,10 +229,13 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             seen = np.ones((H, W), bool)
         small = downsample(truth, H, W)
         out["illumination_error"] = scale_invariant_log_error(recovered_map, small, seen)
+        out["illumination_error_paper"] = scale_invariant_log_error(recovered_map, small, seen, "paper")
         out["seen_fraction"] = float(seen.mean())
         maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
     for c in CONVENTIONS:
         out["brdf_eq20_" + c] = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
+    out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
+    out["truth_highlight_ratio"] = highlight_ratio(samples.values, samples.theta_h, samples.theta_d)
     out["trace"] = [float(r["neg_log_posterior"]) for r in rows]
     out["rounds"] = len(rows)
     out["relight"], out["relight_psnr"], images = _relight(case, material, merl, data)
@@ -248,9 +255,11 @@ def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None) -> 
     values = mean.eval(samples.theta_h, samples.theta_d)
     out = {"brdf_eq20_" + c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
            for c in CONVENTIONS}
+    out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
     out["relight"], out["relight_psnr"], _ = _relight(case, mean, merl, data)
     if truth_map is not None:
-        out["illumination_error"] = scale_invariant_log_error(np.ones_like(truth_map), truth_map, seen)
+        for key, c in (("illumination_error", "cosine"), ("illumination_error_paper", "paper")):
+            out[key] = scale_invariant_log_error(np.ones_like(truth_map), truth_map, seen, c)
     return out
 
 

@@ -20,6 +20,8 @@ Functions:
 * :func:`material_errors` — of a material against measured samples, both conventions;
 * :func:`scale_invariant_log_error` — Eq. 20's measure on images and
   illumination maps; :func:`direction_error_deg` for a recovered light;
+* :func:`highlight_ratio` — peak over off-peak of a BRDF: whether a
+  near-Lambertian material came back with a highlight;
 * :func:`bsdf_values` — any Mitsuba BSDF on the MERL grid, to score baselines
   on the same samples as the DSBRDF.
 """
@@ -95,20 +97,41 @@ def material_errors(material, samples, scale_invariant=True, conventions=CONVENT
     return {c: log_rmse(values, samples.values, samples.cos_i, c) for c in conventions}
 
 
+def highlight_ratio(values, theta_h, theta_d) -> float:
+    """How much of a highlight a BRDF has: the median over samples near the
+    half-vector peak (theta_h < 5 deg) over the median at theta_h 40-50 deg,
+    both at theta_d < 30 deg, mean over channels. About 1 for a Lambertian
+    surface; a glossy one is far above. ``values`` (N, 3) in 1/sr at the angles
+    ``theta_h``, ``theta_d`` (N,) (radians), e.g. MERL samples."""
+    v = np.asarray(values, dtype=np.float64)
+    th, td = np.asarray(theta_h), np.asarray(theta_d)
+    near = (th < math.radians(5)) & (td < math.radians(30))
+    off = (th > math.radians(40)) & (th < math.radians(50)) & (td < math.radians(30))
+    if not near.any() or not off.any():
+        raise ValueError("the samples hold no angles near theta_h = 0 or 45 deg at theta_d < 30 deg")
+    return float(np.mean(np.median(v[near], axis=0) / np.maximum(np.median(v[off], axis=0), 1e-300)))
+
+
 def direction_error_deg(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     c = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
     return math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
 
-def scale_invariant_log_error(values, truth, mask) -> float:
-    """Eq. 20's measure on images or illumination maps: the RMSE of
-    log(1 + s v / m) - log(1 + t / m) over ``mask`` (H, W), m the truth's mean
-    there, at the best scale s of ``values`` (light and material trade scale)."""
+def scale_invariant_log_error(values, truth, mask, convention="cosine") -> float:
+    """Eq. 20's measure on images or illumination maps, at the best scale s of
+    ``values`` (light and material trade scale), over ``mask`` (H, W), in units
+    of m, the truth's mean there: the RMSE of
+
+    * ``"cosine"`` (the default): log(1 + s v / m) - log(1 + t / m), like the
+      cosine BRDF convention nearly blind to what is darker than the mean (a
+      map's sky and ground beside its sun);
+    * ``"paper"``: log(s v / m + 1e-6) - log(t / m + 1e-6), like the paper's
+      convention every decade alike (a map's sky/ground structure)."""
     t = np.asarray(truth, np.float64)[mask]
     ref = max(float(t.mean()), 1e-300)
     return log_rmse_scale_invariant(np.asarray(values, np.float64)[mask] / ref, t / ref, np.ones(t.shape[0]),
-                                    "cosine")[0]
+                                    convention)[0]
 
 
 def relight_psnr(values, truth, mask) -> float:

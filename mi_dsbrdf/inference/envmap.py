@@ -15,7 +15,8 @@ alternating two blocks:
   illumination fixed, Levenberg-Marquardt on psi, the chromaticity variables
   and the map's overall log scale.
 
-Start: random chromaticity (seeded) and, for each of
+Start: chromaticity from the image's colour
+(:func:`~mi_dsbrdf.inference.reflectance.image_chroma_logits`) and, for each of
 :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (psi = 0 and the
 GMM means), a constant map at the image's level refined by a short grey
 illumination block and a short reflectance block; the best starts the rounds.
@@ -39,7 +40,7 @@ from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
-from mi_dsbrdf.inference.reflectance import random_chroma_logits, reflectance_block, reflectance_starts
+from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 
 #: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
@@ -78,7 +79,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         return posteriors[size]
 
     post = posterior(sizes[0])
-    logits0 = random_chroma_logits(cfg, post.R)
+    logits0 = image_chroma_logits(post.observed, post.keep, post.R)
     rows = []
     t0 = time.perf_counter()
 

@@ -25,7 +25,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior, angles_from_direction, direction_from_angles
-from mi_dsbrdf.inference.reflectance import random_chroma_logits, reflectance_block, reflectance_starts
+from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 
 #: directions of the global search (Fibonacci lattice) and how many of them go on
@@ -111,7 +111,7 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     """
     cfg = config or Config()
     post = Posterior(texels, observed, mask, model, cfg, point=point)
-    logits = random_chroma_logits(cfg, post.R)
+    logits = image_chroma_logits(post.observed, post.keep, post.R)
     psi = np.zeros(post.k)
     t0 = time.perf_counter()
     rows = []

@@ -18,7 +18,6 @@ import numpy as np
 
 from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
 from mi_dsbrdf.brdf.dsbrdf import passed_through
-from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.likelihood import KINK
 from mi_dsbrdf.lm import Damping, levenberg_marquardt
 
@@ -30,8 +29,9 @@ MAX_SCALE_STEP = 5.0
 DIRECTION_STEP = 1e-3
 #: damping of the block's steps: start strongly damped (far starts overshoot)
 DAMPING = Damping(initial=1.0, increase=10.0, decrease=10.0, tries=10, minimum=1e-9, floor=1e-9)
-#: concentration of the Dirichlet the chromaticities start from (5: mostly greyish)
-START_CHROMA_CONCENTRATION = 5.0
+#: how far the sharper lobes' starting chromaticity is from the image's towards grey
+#: (highlights of dielectrics are the light's colour; of metals, the body's)
+START_GREY_MIX = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,10 +55,17 @@ def reflectance_starts(model) -> list:
     return starts
 
 
-def random_chroma_logits(config: Config, n_lobes) -> np.ndarray:
-    """(R, 2) chromaticity variables of the seeded random start."""
-    rng = np.random.default_rng(config.seed)
-    return chroma_logits(rng.dirichlet(np.full(3, START_CHROMA_CONCENTRATION), n_lobes))
+def image_chroma_logits(observed, keep, n_lobes) -> np.ndarray:
+    """(R, 2) chromaticity variables of the start: the broad lobe (lobe 0) takes
+    the chromaticity of the usable pixels' mean colour, the sharper lobes that
+    colour mixed with grey by START_GREY_MIX. A grey image starts (and, with the
+    hue prior, stays) grey; a start from random chromaticities came back with
+    coloured lobes on a grey object and traded the object's colour between lobes."""
+    mean = np.maximum(np.asarray(observed, dtype=np.float64)[np.asarray(keep, bool)].mean(axis=0), 0.0)
+    c = mean / mean.sum() if mean.sum() > 0 else np.full(3, 1 / 3)
+    chroma = np.repeat(((1 - START_GREY_MIX) * c + START_GREY_MIX / 3)[None], n_lobes, axis=0)
+    chroma[0] = c
+    return chroma_logits(chroma, floor=1e-3)
 
 
 def psi_jacobian(basis, psi, controls_jacobian) -> np.ndarray:
