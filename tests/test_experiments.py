@@ -143,7 +143,7 @@ def test_natural_light_choice_scores_settings_against_doing_nothing(tmp_path):
                                                                                   w_gradient=30000)
     assert natural_light.parse_config(["w_gradient=1e4"]) == dict(w_gradient=1e4)
     # fabricated results: A halves every measure, B only the BRDF, C is incomplete
-    for name, ratio, n in (("w_gradientA", 0.5, 2), ("w_gradientB", 1.0, 2), ("w_gradientC", 0.1, 1)):
+    for name, ratio, n in (("w_gradient1", 0.5, 2), ("w_gradient2", 1.0, 2), ("w_gradient3", 0.1, 1)):
         os.makedirs(tmp_path / name)
         for i in range(n):
             base = {"brdf_eq20_paper": 1.0, "illumination_error": 2.0, "relight": {"pisa": 0.2}}
@@ -152,10 +152,10 @@ def test_natural_light_choice_scores_settings_against_doing_nothing(tmp_path):
             with open(tmp_path / name / ("%d.json" % i), "w") as f:
                 json.dump(r, f)
     c = natural_light.choose(str(tmp_path), n_cases=2)
-    assert c["best"] == "w_gradientA" and set(c["settings"]) == {"w_gradientA", "w_gradientB", "w_gradientC"}
-    a = c["settings"]["w_gradientA"]
+    assert c["best"] == "w_gradient1" and c["best_config"] == {"w_gradient": 1} and set(c["settings"]) == {"w_gradient1", "w_gradient2", "w_gradient3"}
+    a = c["settings"]["w_gradient1"]
     assert a["illumination_error"] == {"median_ratio": 0.5, "wins": 2} and a["score"] == pytest.approx(0.5)
-    assert c["settings"]["w_gradientB"]["score"] == pytest.approx(2.5 / 3)
+    assert c["settings"]["w_gradient2"]["score"] == pytest.approx(2.5 / 3)
 
 
 def test_config_defaults_are_the_validation_choice():
