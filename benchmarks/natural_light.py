@@ -13,7 +13,9 @@ Two disjoint sets of materials and probes:
 * **validation** (:data:`VALIDATION_MATERIALS` x :data:`VALIDATION_PROBES`): the
   only cases settings and weights are chosen on (``--set validation
   --config w_entropy=300 ...`` runs one setting into its own folder under
-  ``validation/``; ``--choose`` scores them and writes the choice);
+  ``validation/``; ``--choose`` scores the settings of ``validation_sweep/``
+  (:data:`SWEEP`) and the shipped code's ``validation/defaults``, and writes
+  the choice);
 * **report** (:data:`REPORT_MATERIALS` x :data:`REPORT_PROBES`): 12 materials
   spanning the four GMM clusters of the shipped model, 6 probes; run once with
   the shipped defaults, with principled + Adam and DSBRDF + Adam through
@@ -159,6 +161,10 @@ def summary(folder) -> str:
 #: the measures a setting is chosen on (BRDF, illumination and what a user sees)
 CHOICE_MEASURES = ("brdf_eq20_paper", "illumination_error", "relight")
 CHOICE = os.path.join(OUT, "validation_choice.json")
+#: the weight sweep: every setting run before the start and the grey pass kept the
+#: lobes at the image's colour (the chromaticity start from the image was in); the
+#: weights were chosen there, and ``validation/defaults`` is the shipped code
+SWEEP = os.path.join(OUT, "validation_sweep")
 
 
 def setting_scores(folder) -> dict:
@@ -174,7 +180,7 @@ def setting_scores(folder) -> dict:
     return out
 
 
-def choose(root=os.path.join(OUT, "validation"), n_cases=None) -> dict:
+def choose(root=SWEEP, n_cases=None) -> dict:
     """The validation setting with the lowest score (:func:`setting_scores`) among
     the complete ones (every validation case run), and every setting's scores."""
     n_cases = n_cases or len(VALIDATION_MATERIALS) * len(VALIDATION_PROBES)
@@ -265,6 +271,9 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.choose:
         choice = choose()
+        shipped = os.path.join(OUT, "validation", "defaults")
+        if os.path.isdir(shipped):
+            choice["shipped"] = dict(setting_scores(shipped), folder=os.path.relpath(shipped, ROOT))
         with open(CHOICE, "w") as f:
             json.dump(choice, f, indent=1)
         print("| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
@@ -272,6 +281,11 @@ def main(argv=None):
         for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["score"]):
             print("| %s | %d | %.0f | %s | %.3f |" % (name, v["cases"], v["seconds_median"], " | ".join(
                 "%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"]))
+        if "shipped" in choice:
+            v = choice["shipped"]
+            print("| **shipped code** (%s) | %d | %.0f | %s | %.3f |" % (
+                v["folder"], v["cases"], v["seconds_median"],
+                " | ".join("%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"]))
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
         return
     config = parse_config(args.config)

@@ -88,6 +88,11 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         if progress:
             progress(rows[-1])
 
+    # the start and the grey pass keep every lobe at the image's colour: under a grey
+    # map, free chromaticities explained the light's colour, which varies over the
+    # sphere, by saturated lobes (nickel under the warm wells probe: a lobe of
+    # (0.81, 0.18, 0.00) from an image of (0.44, 0.31, 0.25)), and the colour pass
+    # never undid it (it turned the map blue instead); the colour pass frees them
     # start (on the coarse map): each reflectance start with the constant map that
     # matches the image's median level, refined by one grey illumination block and
     # one reflectance block; the best posterior starts the alternation
@@ -101,7 +106,8 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         bins = post.entropy.bins_for(x)
         x = illumination_block(post, x, T, seen, bins, True, start_iters(cfg.illumination_iters))
         L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
-        step = reflectance_block(post, p0, logits0, L, start_iters(cfg.block_iters), fit_scale=True)
+        step = reflectance_block(post, p0, logits0, L, start_iters(cfg.block_iters), fit_scale=True,
+                                 fit_chroma=False)
         value = post.reflectance_terms(step.psi, step.logits, step.L)[0]
         log({"pass": "start", "round": len(rows), "neg_log_posterior": value, "map_size": list(sizes[0])})
         if best is None or value < best[0]:
@@ -125,7 +131,8 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             # pixels: kept only if the posterior over all of them falls too (a step
             # that fits the subset can ruin the rest: a red fabric under ennis went
             # from 7.6e3 to 4.9e5 that way)
-            step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True)
+            step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True,
+                                     fit_chroma=pass_name == "colour")
             new_map = log_map + float(np.log(step.L.max() / L.max()))
             new_T = post.transport(step.psi, step.logits)   # serves the next illumination block
             new = posterior_at(post, step.psi, step.logits, new_map, new_T, seen, bins)

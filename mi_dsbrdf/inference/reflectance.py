@@ -78,7 +78,8 @@ def psi_jacobian(basis, psi, controls_jacobian) -> np.ndarray:
     return (controls_jacobian.reshape(P * 3, -1) @ (basis.bases * free).reshape(basis.n_bases, -1).T).reshape(P, 3, -1)
 
 
-def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None) -> ReflectanceStep:
+def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None,
+                      fit_chroma=True) -> ReflectanceStep:
     """Minimise the posterior over psi and the chromaticity variables at fixed light.
 
     Parameters
@@ -93,15 +94,19 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
     direction : (theta, phi) of a directional or point light, refined jointly
         (its two Jacobian columns by central differences), which resolves the
         light/reflectance coupling that alternation resolves slowly
+    fit_chroma : the chromaticity variables are variables (else kept at ``logits``)
     """
     k, R = psi.size, logits.shape[0]
     view = post.refl
+    n_chroma = 2 * R if fit_chroma else 0
     n_scale = 1 if fit_scale else 0
     n_dir = 0 if direction is None else 2
+    fixed_logits = np.asarray(logits, dtype=np.float64)
 
     def unpack(x):
-        ang = None if direction is None else x[k + 2 * R + n_scale:]
-        return x[:k], x[k:k + 2 * R].reshape(R, 2), (x[k + 2 * R] if fit_scale else 0.0), ang
+        ang = None if direction is None else x[k + n_chroma + n_scale:]
+        z = x[k:k + n_chroma].reshape(R, 2) if fit_chroma else fixed_logits
+        return x[:k], z, (x[k + n_chroma] if fit_scale else 0.0), ang
 
     def aim(ang):
         if ang is not None:
@@ -132,7 +137,7 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
                 hi, lo = [(aim(ang + sgn * e), post.refl.lobes.render(material, Ls))[1] for sgn in (1, -1)]
                 extra.append(((hi - lo) / (2 * DIRECTION_STEP))[:, :, None])
             aim(ang)
-        J = np.concatenate([Jp, Jz] + extra, axis=2)
+        J = np.concatenate([Jp] + ([Jz] if fit_chroma else []) + extra, axis=2)
         J = J[view.keep].reshape(-1, J.shape[2])
         mp = np.maximum(image[view.keep], 0) + post.offset
         d = (np.log(mp) - np.log(np.maximum(view.observed[view.keep], 0) + post.offset)).reshape(-1)
@@ -149,7 +154,7 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         _, g_curve, h_curve = post.curve_penalty(p)
         H[:k, :k] += h_curve
         g[:k] += g_curve
-        if post.model.hue_prior is not None:
+        if post.model.hue_prior is not None and fit_chroma:
             gh = post.w["hue"] * post.model.hue_prior.grad(c)
             g[k:k + 2 * R] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
         return g, H
@@ -157,13 +162,13 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
     def propose(x, step):
         # chromaticity variables stay within +-CHROMA_LIMIT: a saturated softmax has no gradient left
         new = x + step
-        new[k:k + 2 * R] = np.clip(new[k:k + 2 * R], -CHROMA_LIMIT, CHROMA_LIMIT)
+        new[k:k + n_chroma] = np.clip(new[k:k + n_chroma], -CHROMA_LIMIT, CHROMA_LIMIT)
         if fit_scale:
-            new[k + 2 * R] = x[k + 2 * R] + np.clip(step[k + 2 * R], -MAX_SCALE_STEP, MAX_SCALE_STEP)
+            new[k + n_chroma] = x[k + n_chroma] + np.clip(step[k + n_chroma], -MAX_SCALE_STEP, MAX_SCALE_STEP)
         return new
 
-    x0 = np.concatenate([psi, logits.reshape(-1), np.zeros(n_scale), np.zeros(n_dir) if direction is None
-                         else np.asarray(direction, dtype=np.float64)])
+    x0 = np.concatenate([psi, fixed_logits.reshape(-1) if fit_chroma else [], np.zeros(n_scale),
+                         np.zeros(n_dir) if direction is None else np.asarray(direction, dtype=np.float64)])
     # the start's cost at the light the caller set (the same direction when refined)
     res = levenberg_marquardt(linearise, cost, x0, propose=propose, max_iter=iters, damping=DAMPING,
                               cost0=post.reflectance_terms(psi, logits, L)[0])
