@@ -140,7 +140,27 @@ def summary(folder) -> str:
         md.append("| %s | %s |" % (method, " | ".join(
             "%.3f" % np.median([value(r, k) for r in rs]) if rs and all(k in r for r in rs) else "–"
             for k, _, _ in MEASURES)))
-    flat = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN]
+    # this tool against each Adam baseline on the cases both have (same material and probe)
+    key_of = lambda r: (r["case"]["material"], r["case"]["probe"])  # noqa: E731
+    ours = {key_of(r): r for r in by_method.get("dsbrdf", [])}
+    for method in sorted(m for m in by_method if m != "dsbrdf"):
+        pairs = [(ours[key_of(r)], r) for r in by_method[method] if key_of(r) in ours]
+        if not pairs:
+            continue
+        md += ["", "This tool against %s on the %d cases both ran (this tool better in; medians, this tool vs %s):"
+               % (method, len(pairs), method), "", "| " + " | ".join(label for _, label, _ in MEASURES) + " |",
+               "|" + "---|" * len(MEASURES)]
+        cells = []
+        for k, _, hi in MEASURES:
+            if not all(k in a and k in b for a, b in pairs):
+                cells.append("–")
+                continue
+            a, b = np.array([[value(x, k), value(y, k)] for x, y in pairs]).T
+            cells.append("%d/%d; %.3f vs %.3f" % (((a > b) if hi else (a < b)).sum(), len(a), np.median(a),
+                                                   np.median(b)))
+        md.append("| " + " | ".join(cells) + " |")
+    flat = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN and
+            r["case"]["method"] == "dsbrdf"]
     if flat:
         ok = sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in flat)
         md += ["", "Near-Lambertian materials (measured peak / off-peak < %.1f, "

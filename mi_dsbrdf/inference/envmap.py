@@ -22,7 +22,8 @@ GMM means), a constant map at the image's level refined by a short grey
 illumination block and a short reflectance block; the best starts the rounds.
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
-channels: the grey-world assumption), then colour from that start, unless the
+channels: the grey-world assumption; the lobes keep the image's colour), then
+colour from that start (chromaticities and map colour free), unless the
 image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides). The start runs
 on the map at half its resolution (:func:`map_sizes`,
 ``Config.map_levels``); its map moves up by :func:`resample`.
