@@ -23,13 +23,15 @@ Two disjoint sets of materials and probes:
 
 Measures, lower is better except PSNR: BRDF Eq. 20 in the paper's convention
 log(f + 1e-6) and in the cosine-weighted log(1 + f cos theta_i); the
-illumination map's scale-invariant log error; the relit images' (two other
-probes) scale-invariant log error and Stanford-ORB PSNR (dB).
+illumination map's scale-invariant log error in log(1 + L) and in log(L + 1e-6);
+the relit images' (two other probes) scale-invariant log error and
+Stanford-ORB PSNR (dB); for near-Lambertian materials the recovered peak /
+off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
 
-    .venv/bin/python benchmarks/natural_light.py --set validation            # 12 cases, ~3 min
+    .venv/bin/python benchmarks/natural_light.py --set validation            # 12 cases, ~7 min
     .venv/bin/python benchmarks/natural_light.py --set validation --config w_entropy=300 w_gradient=300
     .venv/bin/python benchmarks/natural_light.py --choose   # scores the settings, writes the choice
-    .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~1 h
+    .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
     .venv/bin/python benchmarks/natural_light.py --set report --summary      # tables from the results
     .venv/bin/python benchmarks/natural_light.py --set report --report       # -> docs/natural_light.{md,png}
 """
