@@ -85,7 +85,8 @@ def parse_config(items) -> dict:
     parts of a :func:`setting_name` (``["w_entropy300", "map_levels1"]``) read alike."""
     out = {}
     for item in items or []:
-        k, v = item.split("=", 1) if "=" in item else re.fullmatch(r"(.*?)(-?[0-9.]+(?:e[-+]?[0-9]+)?)", item).groups()
+        k, v = (item.split("=", 1) if "=" in item
+                else re.fullmatch(r"(.*?)(-?[0-9.]+(?:e[-+]?[0-9]+)?)", item).groups())
         out[k] = int(v) if v.lstrip("-").isdigit() else float(v)
     return out
 
@@ -110,6 +111,16 @@ def value(r, key):
     return r[key]
 
 
+def against_nothing(rows, key, higher_is_better=False) -> tuple:
+    """(cases better than doing nothing, median of result / doing nothing, or of
+    result - doing nothing when higher is better) of ``key`` over ``rows``."""
+    x = np.array([value(r, key) for r in rows])
+    b = np.array([value(r["baseline"], key) for r in rows])
+    if higher_is_better:
+        return int((x > b).sum()), float(np.median(x - b))
+    return int((x < b).sum()), float(np.median(x / b))
+
+
 def summary(folder) -> str:
     """Markdown: per method and measure, the fraction of cases better than doing
     nothing and the median ratio (PSNR: median difference in dB), then every case."""
@@ -126,12 +137,8 @@ def summary(folder) -> str:
             if any(key not in r for r in rs):           # results written before the measure existed
                 cells.append("–")
                 continue
-            x = np.array([value(r, key) for r in rs])
-            b = np.array([value(r["baseline"], key) for r in rs])
-            if hi:
-                cells.append("%d/%d, %+.1f dB" % ((x > b).sum(), len(x), np.median(x - b)))
-            else:
-                cells.append("%d/%d, %.2f×" % ((x < b).sum(), len(x), np.median(x / b)))
+            wins, median = against_nothing(rs, key, hi)
+            cells.append(("%d/%d, %+.1f dB" if hi else "%d/%d, %.2f×") % (wins, len(rs), median))
         md.append("| %s | %d | %.1f | %s |" % (method, len(rs), np.median([r["seconds"] for r in rs]),
                                                " | ".join(cells)))
     md += ["", "Medians over the cases:", "", "| method | " + " | ".join(label for _, label, _ in MEASURES) + " |",
@@ -167,8 +174,9 @@ def summary(folder) -> str:
         ok = sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in flat)
         md += ["", "Near-Lambertian materials (measured peak / off-peak < %.1f, "
                ":func:`~mi_dsbrdf.evaluation.metrics.highlight_ratio`): no highlight, i.e. a recovered ratio "
-               "below %.1f× the measured one, in %d of %d cases (the mean material's ratio: %.1f)." % (
-                   NEAR_LAMBERTIAN, HIGHLIGHT_LIMIT, ok, len(flat), flat[0]["baseline"]["highlight_ratio"]), "",
+               "below %.1f× the measured one, in %d of %d cases (the mean material's median ratio: %.1f)." % (
+                   NEAR_LAMBERTIAN, HIGHLIGHT_LIMIT, ok, len(flat),
+                   np.median([r["baseline"]["highlight_ratio"] for r in flat])), "",
                "| case | peak / off-peak: recovered | measured |", "|---|---|---|"]
         md += ["| %s | %.2f | %.2f |" % (r["case"]["id"], r["highlight_ratio"], r["truth_highlight_ratio"])
                for r in flat]
@@ -196,8 +204,8 @@ def setting_scores(folder) -> dict:
     rows = [json.load(open(f)) for f in sorted(glob.glob(os.path.join(folder, "*.json")))]
     out = {"cases": len(rows), "seconds_median": float(np.median([r["seconds"] for r in rows]))}
     for key in CHOICE_MEASURES:
-        ratio = np.array([value(r, key) / value(r["baseline"], key) for r in rows])
-        out[key] = {"median_ratio": float(np.median(ratio)), "wins": int((ratio < 1).sum())}
+        wins, median = against_nothing(rows, key)
+        out[key] = {"median_ratio": median, "wins": wins}
     out["score"] = float(np.mean([out[k]["median_ratio"] for k in CHOICE_MEASURES]))
     return out
 
@@ -241,24 +249,21 @@ def write_report(folder, docs=DOCS) -> str:
     if cases:
         fig, axes = plt.subplots(len(cases), 5, figsize=(13, 2.3 * len(cases)), squeeze=False,
                                  gridspec_kw={"width_ratios": [2, 2, 2, 2, 1]})
+        def log_map(f, i):                 # log luminance of the stored pair's truth (0) or recovery (1)
+            return np.log(np.maximum(f["illumination"][i].astype(np.float64).mean(-1), 1e-4))
         for row, (material, probe, f) in zip(axes, cases):
-            truth_map = np.log(np.maximum(f["dsbrdf"]["illumination"][0].astype(np.float64).mean(-1), 1e-4))
-            lo, hi = np.percentile(truth_map, [1, 99.5])
+            maps = [(log_map(f["dsbrdf"], 0), "%s: true map (log)" % probe), (log_map(f["dsbrdf"], 1), "this tool"),
+                    (log_map(f["principled-adam"], 1), "principled + Adam")]
+            lo, hi = np.percentile(maps[0][0], [1, 99.5])
             relit = [k for k in f["dsbrdf"].files if k != "illumination"][0]
-            panels = [(truth_map, "%s: true map (log)" % probe),
-                      (np.log(np.maximum(f["dsbrdf"]["illumination"][1].astype(np.float64).mean(-1), 1e-4)),
-                       "this tool"),
-                      (np.log(np.maximum(f["principled-adam"]["illumination"][1].astype(np.float64).mean(-1), 1e-4)),
-                       "principled + Adam"),
-                      (None, "%s relit (%s): truth | this tool" % (material, relit))]
-            for ax, (img, title) in zip(row[:3], panels[:3]):
+            for ax, (img, title) in zip(row[:3], maps):
                 ax.imshow(img, vmin=lo, vmax=hi, cmap="magma")
                 ax.set_title(title, fontsize=8)
             pair = f["dsbrdf"][relit].astype(np.float64)
             adam = f["principled-adam"][relit].astype(np.float64)[1]
             ref = np.percentile(pair[0], 99)
             row[3].imshow(_tonemap(np.concatenate([pair[0], pair[1]], axis=1), ref))
-            row[3].set_title(panels[3][1], fontsize=7)
+            row[3].set_title("%s relit (%s): truth | this tool" % (material, relit), fontsize=7)
             row[4].imshow(_tonemap(adam, ref))
             row[4].set_title("principled + Adam", fontsize=7)
             for ax in row:

@@ -124,20 +124,22 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         aim(ang)
         jac = post.refl.lobes.jacobian(material, Ls)
         image = jac.image
-        Jp = psi_jacobian(post.model.basis, p, jac.controls)
-        c = softmax_chroma(z)
-        dc_dz = softmax_jacobian(c)                                              # (R, 3, 2)
-        # channel c depends on chromaticity (r, c) only
-        Jz = np.einsum("pcr,rck->pcrk", jac.chromaticity, dc_dz).reshape(image.shape[0], 3, -1)
-        extra = [image[:, :, None]] if fit_scale else []
+        columns = [psi_jacobian(post.model.basis, p, jac.controls)]
+        if fit_chroma:
+            c = softmax_chroma(z)
+            dc_dz = softmax_jacobian(c)                                          # (R, 3, 2)
+            # channel c depends on chromaticity (r, c) only
+            columns.append(np.einsum("pcr,rck->pcrk", jac.chromaticity, dc_dz).reshape(image.shape[0], 3, -1))
+        if fit_scale:
+            columns.append(image[:, :, None])
         if ang is not None:
             for j in range(2):
                 e = np.zeros(2)
                 e[j] = DIRECTION_STEP
                 hi, lo = [(aim(ang + sgn * e), post.refl.lobes.render(material, Ls))[1] for sgn in (1, -1)]
-                extra.append(((hi - lo) / (2 * DIRECTION_STEP))[:, :, None])
+                columns.append(((hi - lo) / (2 * DIRECTION_STEP))[:, :, None])
             aim(ang)
-        J = np.concatenate([Jp] + ([Jz] if fit_chroma else []) + extra, axis=2)
+        J = np.concatenate(columns, axis=2)
         J = J[view.keep].reshape(-1, J.shape[2])
         mp = np.maximum(image[view.keep], 0) + post.offset
         d = (np.log(mp) - np.log(np.maximum(view.observed[view.keep], 0) + post.offset)).reshape(-1)
