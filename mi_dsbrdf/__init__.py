@@ -21,7 +21,9 @@ from mi_dsbrdf.config import PRESETS, Config  # noqa: E402
 from mi_dsbrdf.errors import (BackendError, ConfigError, InputError, MaterialError,  # noqa: E402
                               MeasuredFileError, MiDsbrdfError, ModelError, SceneError, VariantError)
 from mi_dsbrdf.model.library import load_material  # noqa: E402
+from mi_dsbrdf.app.recover import recover  # noqa: E402
+from mi_dsbrdf.app.result import Result  # noqa: E402
 
 __version__ = "0.1.0"
-__all__ = ["Material", "load_material", "Config", "PRESETS", "MiDsbrdfError", "BackendError", "VariantError",
+__all__ = ["recover", "Result", "Material", "load_material", "Config", "PRESETS", "MiDsbrdfError", "BackendError", "VariantError",
            "MaterialError", "MeasuredFileError", "ModelError", "ConfigError", "InputError", "SceneError"]

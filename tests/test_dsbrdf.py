@@ -11,7 +11,7 @@ from mi_dsbrdf.brdf.angles import from_half_diff, half_diff, log_cos_h
 from mi_dsbrdf.brdf.dsbrdf import lobe_rgb
 
 GAMMAS = [1.0, 10.0, 100.0, 1e3, 1e4]
-KAPPAS = [1e-6, 1e-3, 0.1, 1.0, 10.0, 40.0, 80.0]
+KAPPAS = [1e-6, 1e-3, 0.1, 1.0, 10.0, 40.0, 60.0]
 TH = np.array([0.0, 1e-4, 1e-3, 0.01, 0.05, 0.2, 0.5, 1.0, 1.4, np.pi / 2])
 TD = np.array([0.0, 0.3, 0.8, 1.2, 1.5, np.pi / 2])
 CHROMA = [0.5, 0.3, 0.2]
@@ -22,7 +22,7 @@ def constant_material(kappa, gamma):
 
 
 def varying_material():
-    return Material.from_curves([[0.5, 0.6, 0.8, 1.0, 2.0, 4.0], [20, 25, 30, 40, 60, 80]],
+    return Material.from_curves([[0.5, 0.6, 0.8, 1.0, 2.0, 4.0], [20, 25, 30, 40, 50, 60]],
                                 [[1.0, 1.2, 1.5, 2.0, 2.5, 3.0], [5e3, 4e3, 2e3, 1e3, 500, 300]],
                                 [[0.6, 0.3, 0.1], [1 / 3, 1 / 3, 1 / 3]])
 
@@ -51,12 +51,12 @@ def test_reference_matches_formula():
     expected = np.outer(np.expm1(3.0 * np.cos(th) ** 50), CHROMA)
     np.testing.assert_allclose(m.eval(th, td), expected, rtol=1e-12)
     kappa, gamma = varying_material().curves(np.array([0.0, np.pi / 2]))
-    np.testing.assert_allclose(kappa[:, 1], [20, 80], rtol=1e-12)   # clamped spline hits end controls
+    np.testing.assert_allclose(kappa[:, 1], [20, 60], rtol=1e-12)   # clamped spline hits end controls
     np.testing.assert_allclose(gamma[:, 1], [5e3, 300], rtol=1e-12)
 
 
 def test_kernel_matches_float64_reference_on_extreme_grid():
-    """gamma 1..1e4, kappa 1e-6..80, theta_h and theta_d including 0 and 90 deg."""
+    """gamma 1..1e4, kappa 1e-6..60, theta_h and theta_d including 0 and 90 deg."""
     T, D = (a.reshape(-1) for a in np.meshgrid(TH, TD, indexing="ij"))
     worst = {}
     for kappa in KAPPAS:
@@ -104,7 +104,7 @@ def bsdf_query(bsdf, wi32, wo32):
 
 
 def test_plugin_eval_matches_reference_with_horizon(tmp_path):
-    for m in (varying_material(), constant_material(80.0, 1e4), constant_material(1e-6, 1.0)):
+    for m in (varying_material(), constant_material(60.0, 1e4), constant_material(1e-6, 1.0)):
         bsdf = plugin_for(m, tmp_path)
         wi32, wo32, t_h, t_d, cos_o = directions(np.linspace(0, np.pi / 2, 40), np.linspace(0, np.pi / 2, 40))
         si, wo, ctx = bsdf_query(bsdf, wi32, wo32)
@@ -117,7 +117,7 @@ def test_plugin_eval_matches_reference_with_horizon(tmp_path):
         assert err < 5e-4
 
 
-@pytest.mark.parametrize("kappa,gamma", [(1e-6, 1.0), (80.0, 1e4), (40.0, 1.0), (1e-3, 1e4)])
+@pytest.mark.parametrize("kappa,gamma", [(1e-6, 1.0), (60.0, 1e4), (40.0, 1.0), (1e-3, 1e4)])
 def test_gradients_sample_and_pdf_finite_at_extremes(kappa, gamma, tmp_path):
     m = constant_material(kappa, gamma)
     T, D = (a.reshape(-1) for a in np.meshgrid(TH, TD, indexing="ij"))
@@ -140,6 +140,40 @@ def test_gradients_sample_and_pdf_finite_at_extremes(kappa, gamma, tmp_path):
     assert np.all(np.isfinite(np.array(pdf)))
 
 
+@pytest.mark.parametrize("gamma", [1e4, 1e6])
+def test_direction_gradients_finite_at_the_sharpest_peak(gamma):
+    """kappa at its bound, gamma up to its bound: d eval / d theta_o stays finite from
+    the mirror direction out to 3 deg (at kappa 85 it was NaN within 0.26 deg:
+    e^kappa * kappa * gamma overflowed float32 in the chain rule), and the
+    derivative is exact where the formula's conditioning allows."""
+    bsdf = mi.load_dict({"type": "dsbrdf", "lobes": 1, "kappa_0": "60", "gamma_0": "%g" % gamma,
+                         "chromaticity_0": "0.25 0.25 0.5"})
+    ti = np.radians(30.0)
+    offsets = np.radians(np.concatenate([[0.0], np.logspace(-4, 0.5, 40)]))
+    theta = mi.Float(ti + offsets)
+    dr.enable_grad(theta)
+    si = dr.zeros(mi.SurfaceInteraction3f, offsets.size)
+    si.wi = mi.Vector3f(float(np.sin(ti)), 0.0, float(np.cos(ti)))
+    value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(-dr.sin(theta), 0, dr.cos(theta)))
+    dr.backward(value.z)
+    grad, v = np.array(dr.grad(theta)), np.array(value.z)
+    assert np.all(np.isfinite(grad)) and np.all(np.isfinite(v)) and v[0] > 1e24
+    # against the float64 derivative of Eq. 4 * cos theta_o by central differences, where the lobe is not flat
+    m = Material.from_curves([[60.0] * 6], [[gamma] * 6], [[0.25, 0.25, 0.5]])
+
+    def f(t):
+        return m.eval(np.abs(t - ti) / 2, np.full(t.shape, (t + ti) / 2))[:, 2] * np.cos(t)
+    t, h = ti + offsets, 1e-7
+    ref = (f(t + h) - f(t - h)) / (2 * h)
+    slope = np.abs(ref) > 1e-3 * np.abs(ref).max()
+    np.testing.assert_allclose(grad[slope], ref[slope], rtol=0.05)
+
+
+def test_material_beyond_the_kappa_bound_is_refused():
+    with pytest.raises(MaterialError, match="kappa must be <= 60"):
+        Material.from_curves([[80.0] * 6], [[1e4] * 6], [[0.25, 0.25, 0.5]])
+
+
 def test_material_file_round_trip_and_load_material(tmp_path):
     m = varying_material()
     p = tmp_path / "material.json"
@@ -154,7 +188,7 @@ def test_material_file_round_trip_and_load_material(tmp_path):
     (lambda d: d.update(log_kappa=[[0.0] * 5]), "log_kappa must have 6 values"),
     (lambda d: d.update(chromaticity=[[0.5, 0.5, 0.5], [0.2, 0.3, 0.5]]), "must sum to 1"),
     (lambda d: d.update(chromaticity=[[1.2, -0.2, 0.0], [0.2, 0.3, 0.5]]), "non-negative"),
-    (lambda d: d.update(log_kappa=[[5.0] * 6, [0.0] * 6]), "kappa must be <= 85"),
+    (lambda d: d.update(log_kappa=[[5.0] * 6, [0.0] * 6]), "kappa must be <= 60"),
     (lambda d: d.update(log_gamma=[[0.0] * 6]), "one row per lobe"),
     (lambda d: d.pop("log_gamma"), "lacks log_gamma"),
     (lambda d: d.update(format="something-else"), "not a mi-dsbrdf material"),

@@ -10,7 +10,7 @@ import sys
 import mitsuba as mi
 
 from mi_dsbrdf.app.demo import run
-from mi_dsbrdf.app.io import prepare_out
+from mi_dsbrdf.app.photo import LIGHTS, photo_scene
 from mi_dsbrdf.app.recover import recover_files
 from mi_dsbrdf.app.render import relight, render_to_files
 from mi_dsbrdf.app.scenes import scene_path
@@ -36,10 +36,13 @@ def _config(args):
 
 def cmd_render(args):
     scene = scene_path(args.scene)
-    prepare_out(args.out, args.force)
-    stem = os.path.join(args.out, os.path.splitext(os.path.basename(args.scene))[0])
-    params = dict(p.split("=", 1) for p in args.param)
-    r = render_to_files(scene, stem, spp=args.spp, **params)
+    params = {}
+    for p in args.param:
+        if "=" not in p:
+            raise InputError("--param %r: give NAME=VALUE" % p)
+        name, value = p.split("=", 1)
+        params[name] = value
+    r = render_to_files(scene, args.out, spp=args.spp, force=args.force, **params)
     print("rendered %s in %.2f s -> %s, %s" % (args.scene, r["seconds"], r["exr"], r["png"]))
 
 
@@ -75,20 +78,30 @@ def _map_size(text):
 
 
 def cmd_recover(args):
-    log = recover_files(args.scene, args.image, args.out, mask_file=args.mask, force=args.force,
-                        config=_config(args))
-    for line in log["needs"]:
+    if (args.scene is None) == (not args.sphere):
+        raise InputError("give --scene SCENE.xml, or --sphere for a photograph of a sphere (no scene file)")
+    if not args.sphere and (args.light is not None or args.fov is not None):
+        raise InputError("--light and --fov describe the scene --sphere builds; a --scene brings its own")
+    scene = args.scene
+    if args.sphere:
+        scene, circle = photo_scene(args.image, args.mask, light=args.light or "envmap", fov=args.fov,
+                                    srgb=args.srgb)
+        print("  sphere: centre (%.1f, %.1f) px, radius %.1f px, %s camera, %s light" % (
+            circle + ("orthographic" if args.fov is None else "perspective (fov %g)" % args.fov,
+                      args.light or "envmap")))
+    result = recover_files(scene, args.image, args.out, mask_file=args.mask, force=args.force,
+                           config=_config(args), srgb=args.srgb)
+    for line in result.log["needs"]:
         print("  " + line)
-    if log.get("unseen_texels"):
+    if result.log.get("unseen_texels"):
         print("  %d illumination texels are seen by no pixel: left black (see illumination.png)"
-              % log["unseen_texels"])
-    print("recovered in %.1f s -> %s" % (log["seconds"], args.out))
+              % result.log["unseen_texels"])
+    print("recovered in %.1f s -> %s" % (result.seconds, args.out))
 
 
 def cmd_relight(args):
-    if os.path.exists(args.out) and not args.force:
-        raise InputError("%s exists; pass --force to replace it" % args.out)
-    r = relight(args.material, args.envmap, args.out, shape=args.shape, res=args.res, spp=args.spp)
+    r = relight(args.material, args.out, envmap=args.envmap, shape=args.shape, scene=args.scene,
+                shape_id=args.shape_id, res=args.res, spp=args.spp, force=args.force)
     print("relit in %.1f s -> %s, %s" % (r["seconds"], r["exr"], r["png"]))
 
 
@@ -114,7 +127,7 @@ def main(argv=None):
     p.add_argument("--spp", type=int, default=None)
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="override a scene <default> (repeatable)")
-    p.add_argument("--force", action="store_true", help="write into an existing non-empty directory")
+    p.add_argument("--force", action="store_true", help="replace earlier renders of the scene in --out")
     p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("demo", help="recover a shipped material under a generated sky, and report (main job)")
@@ -139,20 +152,30 @@ def main(argv=None):
     p.set_defaults(func=cmd_build_model)
 
     p = sub.add_parser("recover", help="recover reflectance and illumination from one image")
-    p.add_argument("--scene", required=True, help="Mitsuba scene XML (camera, object with a dsbrdf BSDF, light)")
-    p.add_argument("--image", required=True, help="observed HDR image (EXR/HDR), film-sized")
+    p.add_argument("--scene", default=None,
+                   help="Mitsuba scene XML (camera, object with a dsbrdf BSDF, light); or use --sphere")
+    p.add_argument("--sphere", action="store_true",
+                   help="the image is a photograph of a sphere: build the scene from its outline (no XML)")
+    p.add_argument("--light", default=None, choices=LIGHTS,
+                   help="with --sphere: the kind of light to recover (default envmap)")
+    p.add_argument("--fov", default=None, type=float,
+                   help="with --sphere: horizontal field of view in degrees (default: orthographic camera)")
+    p.add_argument("--image", required=True, help="observed linear HDR image (EXR/HDR), film-sized")
+    p.add_argument("--srgb", action="store_true", help="the image is 8-bit sRGB (PNG/JPEG): linearise it")
     p.add_argument("--mask", default=None, help="optional mask image (white = use)")
     p.add_argument("--out", required=True, help="result directory")
     _config_arguments(p, "benchmarked")
-    p.add_argument("--force", action="store_true", help="write into an existing non-empty directory")
+    p.add_argument("--force", action="store_true", help="replace an earlier result directory")
     p.set_defaults(func=cmd_recover)
 
-    p = sub.add_parser("relight", help="render a recovered material under a new illumination map")
+    p = sub.add_parser("relight", help="render a recovered material under a new map or in your own scene")
     p.add_argument("material", help="material.json (from recover) or a library material name")
-    p.add_argument("--envmap", required=True, help="lat-long HDR/EXR illumination map")
-    p.add_argument("--shape", default="sphere", help="sphere, torus or a .ply/.obj mesh (default sphere)")
+    p.add_argument("--envmap", default=None, help="lat-long HDR/EXR illumination map")
+    p.add_argument("--shape", default="sphere", help="with --envmap: sphere, torus or a .ply/.obj mesh")
+    p.add_argument("--scene", default=None, help="your scene XML instead: the material goes on --shape-id")
+    p.add_argument("--shape-id", default=None, help="with --scene: id of the shape that gets the material")
     p.add_argument("--out", required=True, help="output EXR (a PNG is written beside it)")
-    p.add_argument("--res", type=int, default=256)
+    p.add_argument("--res", type=int, default=256, help="with --envmap: image size")
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.set_defaults(func=cmd_relight)

@@ -23,7 +23,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf import load_material
-from mi_dsbrdf.app.io import prepare_out, read_image, save_preview, write_exr
+from mi_dsbrdf.app.io import read_image, save_preview, staged_output, write_exr
 from mi_dsbrdf.app.recover import recover_files
 from mi_dsbrdf.app.scenes import camera
 from mi_dsbrdf.config import PRESETS, Config
@@ -36,6 +36,11 @@ from mi_dsbrdf.model.samples import samples_from_function
 #: The sun of the observed image and of the relighting sky (world, y up, towards the sun).
 SUN = (0.5, 0.6, 0.62)
 RELIGHT_SUN = (-0.7, 0.35, 0.6)
+
+
+#: the files of a demo folder (``--force`` replaces only such a folder)
+DEMO_FILES = ("placeholder.exr", "observed.exr", "scene.xml", "recovered", "comparison.png", "report.json",
+              "report.md")
 
 
 def sunsky(sun, sun_scale=1.0) -> dict:
@@ -92,9 +97,14 @@ def brdf_errors(material, truth) -> dict:
 
 def run(out, material="gold-metallic-paint", res=64, config: Config = PRESETS["demo"], spp=256,
         force=False) -> dict:
-    """Render, recover (with ``config``) and report into the folder ``out``; returns the report dict."""
+    """Render, recover (with ``config``) and report into the folder ``out`` (written
+    whole at the end, see :func:`~mi_dsbrdf.app.io.staged_output`); returns the report dict."""
+    with staged_output(out, force, DEMO_FILES) as tmp:
+        return _run(tmp, material, res, config, spp)
+
+
+def _run(out, material, res, config, spp) -> dict:
     map_size = config.map_size
-    prepare_out(out, force)
     t0 = time.perf_counter()
     # 1. the observed image
     write_exr(os.path.join(out, "placeholder.exr"), np.ones((8, 16, 3), dtype=np.float32))
@@ -107,7 +117,7 @@ def run(out, material="gold-metallic-paint", res=64, config: Config = PRESETS["d
     with open(scene_file, "w") as f:
         f.write(scene_xml(res, "placeholder.exr"))
     rec = os.path.join(out, "recovered")
-    log = recover_files(scene_file, os.path.join(out, "observed.exr"), rec, force=force, config=config)
+    log = recover_files(scene_file, os.path.join(out, "observed.exr"), rec, config=config).log
     # 3. report
     truth = load_material(material)
     found = load_material(os.path.join(rec, "material.json"))

@@ -5,7 +5,10 @@ with the file's name and what is wrong.
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import shutil
+import tempfile
 
 import mitsuba as mi
 import numpy as np
@@ -13,16 +16,24 @@ import numpy as np
 from mi_dsbrdf.errors import InputError
 
 
-def read_image(path) -> np.ndarray:
-    """(H, W, 3) float64 from an EXR/HDR/PNG file; InputError if missing or unreadable."""
+#: integer pixel formats: an 8- or 16-bit image holds display values, not radiance
+LDR_FORMATS = (mi.Struct.Type.UInt8, mi.Struct.Type.UInt16)
+
+
+def _bitmap(path, what):
     path = os.fspath(path)
     if not os.path.exists(path):
-        raise InputError("image %s does not exist" % path)
+        raise InputError("%s %s does not exist" % (what, path))
+    if os.path.isdir(path):
+        raise InputError("%s %s is a folder, not an image file" % (what, path))
     try:
-        bmp = mi.Bitmap(path)
+        return mi.Bitmap(path)
     except Exception as e:  # noqa: BLE001  (Mitsuba raises RuntimeError subclasses with varied text)
-        raise InputError("image %s is unreadable: %s" % (path, str(e).splitlines()[-1])) from None
-    a = np.array(bmp, dtype=np.float64)
+        raise InputError("%s %s is unreadable: %s" % (what, path, str(e).splitlines()[-1])) from None
+
+
+def _rgb(a) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
     if a.ndim == 2:
         a = a[..., None]
     if a.shape[2] == 1:
@@ -30,22 +41,58 @@ def read_image(path) -> np.ndarray:
     return a[..., :3]
 
 
+def read_image(path, srgb=False, what="image") -> np.ndarray:
+    """(H, W, 3) float64 linear radiance from an EXR/HDR file.
+
+    An 8- or 16-bit file (PNG, JPEG) holds display values: with ``srgb`` it is
+    linearised by the sRGB curve to [0, 1], without it an InputError names the
+    fix (a raw 8-bit value taken as radiance is wrong by the curve and a factor
+    of 255). InputError if the file is missing or unreadable.
+    """
+    bmp = _bitmap(path, what)
+    if bmp.component_format() in LDR_FORMATS:
+        if not srgb:
+            raise InputError("%s %s is %d-bit (display values, not radiance): give a linear HDR image (EXR/HDR), "
+                             "or pass --srgb (srgb=True) to linearise it from sRGB" % (
+                                 what, os.fspath(path), 8 if bmp.component_format() == mi.Struct.Type.UInt8 else 16))
+        fmt = mi.Bitmap.PixelFormat.Y if bmp.pixel_format() in (mi.Bitmap.PixelFormat.Y, mi.Bitmap.PixelFormat.YA) \
+            else mi.Bitmap.PixelFormat.RGB
+        bmp = bmp.convert(fmt, mi.Struct.Type.Float32, srgb_gamma=False)
+    return _rgb(bmp)
+
+
 def read_mask(path, shape) -> np.ndarray:
-    """(H, W) bool: pixels brighter than half the mask file's maximum (PNG 0-255 or float)."""
-    a = read_image(path).mean(axis=2)
-    m = a > 0.5 * a.max() if a.max() > 0 else np.zeros(a.shape, bool)
-    if m.shape != shape:
-        raise InputError("mask %s is %dx%d but the image is %dx%d" % (path, m.shape[1], m.shape[0], shape[1], shape[0]))
-    if not m.any():
-        raise InputError("mask %s is empty: no pixel to recover from" % path)
-    return m
+    """(H, W) bool: pixels brighter than half the mask file's maximum (any format:
+    a PNG of 0/255 or a float image); InputError if missing, non-finite, the wrong
+    size or empty."""
+    a = _rgb(_bitmap(path, "mask")).mean(axis=2)
+    return as_mask(a, shape, "mask %s" % os.fspath(path))
 
 
-def check_image(image, film_size, path="image") -> None:
-    """InputError for size mismatch, non-finite, negative or all-black images."""
-    h, w = image.shape[:2]
-    if (w, h) != tuple(film_size):
-        raise InputError("%s is %dx%d but the scene's film is %dx%d" % (path, w, h, film_size[0], film_size[1]))
+def as_mask(a, shape, what="mask") -> np.ndarray:
+    """(H, W) bool from a mask array (bool, or numbers: above half the maximum);
+    InputError if it is non-finite, the wrong size or empty."""
+    a = np.asarray(a)
+    if a.ndim == 3:
+        a = a.mean(axis=2)
+    if a.ndim != 2:
+        raise InputError("%s must be an (H, W) array, got shape %s" % (what, a.shape))
+    if a.dtype != bool:
+        a = a.astype(np.float64)
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise InputError("%s has %d NaN/Inf values (first at pixel %s)" % (
+                what, int(bad.sum()), tuple(int(v) for v in np.argwhere(bad)[0][::-1])))
+        a = a > 0.5 * a.max() if a.max() > 0 else np.zeros(a.shape, bool)
+    if a.shape != tuple(shape):
+        raise InputError("%s is %dx%d but the image is %dx%d" % (what, a.shape[1], a.shape[0], shape[1], shape[0]))
+    if not a.any():
+        raise InputError("%s is empty: no pixel to recover from" % what)
+    return a
+
+
+def check_image(image, path="image") -> None:
+    """InputError for non-finite, negative or all-black images."""
     bad = ~np.isfinite(image)
     if bad.any():
         raise InputError("%s has %d NaN/Inf values (first at pixel %s)" % (
@@ -64,10 +111,83 @@ def saturated(image) -> np.ndarray:
     return at_top if at_top.sum() >= 4 else np.zeros(at_top.shape, bool)
 
 
-def prepare_out(path, force) -> None:
-    if os.path.exists(path) and os.listdir(path) and not force:
-        raise InputError("output directory %s exists and is not empty; pass --force to write into it" % path)
-    os.makedirs(path, exist_ok=True)
+def _inside(path, folder) -> bool:
+    path, folder = os.path.realpath(path), os.path.realpath(folder)
+    return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
+
+
+def check_out(out, force=False, ours=(), inputs=()) -> None:
+    """InputError unless the folder ``out`` can take a new result: it does not
+    exist, or is empty, or (with ``force``) holds only files named in ``ours``
+    (an earlier result); no input file lies inside it; its parent is writable."""
+    out = os.fspath(out)
+    for f in inputs:
+        if f is not None and _inside(f, out):
+            raise InputError("output folder %s holds the input %s: choose another output folder, "
+                             "nothing of the input is overwritten" % (out, os.fspath(f)))
+    if os.path.exists(out):
+        if not os.path.isdir(out):
+            raise InputError("output %s is a file, not a folder: choose a folder name" % out)
+        names = sorted(os.listdir(out))
+        if names and not force:
+            raise InputError("output folder %s exists and is not empty; pass --force to replace it" % out)
+        foreign = [n for n in names if n not in ours]
+        if foreign:
+            raise InputError("output folder %s holds files that are not a result of this command (%s): "
+                             "choose another output folder" % (out, ", ".join(foreign[:3])))
+    parent = os.path.dirname(os.path.abspath(out))
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent) or not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError("cannot write into %s: permission denied" % parent)
+
+
+@contextlib.contextmanager
+def staged_output(out, force=False, ours=(), inputs=()):
+    """Write a result folder all at once: yields a fresh folder beside ``out``,
+    which replaces ``out`` only when the block finishes (:func:`check_out` first).
+
+    An error or an interruption leaves ``out`` as it was (an earlier result
+    whole, or nothing) and no partial folder behind.
+    """
+    check_out(out, force, ours, inputs)
+    out = os.path.abspath(os.fspath(out))
+    parent = os.path.dirname(out)
+    try:
+        os.makedirs(parent, exist_ok=True)
+        tmp = tempfile.mkdtemp(prefix=".%s.partial-" % os.path.basename(out), dir=parent)
+    except OSError as e:
+        raise InputError("cannot write into %s: %s" % (parent, e.strerror)) from None
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    old = None
+    if os.path.exists(out):
+        old = tempfile.mkdtemp(prefix=".%s.old-" % os.path.basename(out), dir=parent)
+        os.rename(out, os.path.join(old, "result"))
+    os.rename(tmp, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def staged_file(out_file, force=False):
+    """A temporary name beside ``out_file`` to write to, then ``os.replace`` it into
+    place (InputError if ``out_file`` exists without ``force``, is a folder, or
+    its folder does not exist or is not writable)."""
+    out_file = os.path.abspath(os.fspath(out_file))
+    if os.path.isdir(out_file):
+        raise InputError("output %s is a folder: give a file name" % out_file)
+    if os.path.exists(out_file) and not force:
+        raise InputError("%s exists; pass --force to replace it" % out_file)
+    folder = os.path.dirname(out_file)
+    if not os.path.isdir(folder):
+        raise InputError("folder %s of the output does not exist" % folder)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError("cannot write into %s: permission denied" % folder)
+    stem, ext = os.path.splitext(os.path.basename(out_file))
+    return os.path.join(folder, ".%s.partial%s" % (stem, ext))
 
 
 def write_exr(path, image) -> None:

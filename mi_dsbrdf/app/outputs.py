@@ -18,28 +18,35 @@ from mi_dsbrdf.app.scenes import camera
 from mi_dsbrdf.inference.latlong import procedural_sky
 
 
-def write_scene_xml(scene_file, out_file, material_file, light) -> None:
-    """Write ``out_file``: the scene of ``scene_file`` with its ``dsbrdf`` object
-    reading ``material_file`` and its light replaced by ``light``:
-    {"type": "envmap", "filename"} | {"type": "directional", "direction", "intensity"}
-    | {"type": "point", "position", "intensity"} (direction: object -> light).
-    Relative file names of the input scene (meshes, textures) are made absolute
-    so that the new scene loads from its own folder."""
-    base = os.path.dirname(os.path.abspath(os.fspath(scene_file)))
-    state = mi.parser.parse_file(mi.parser.ParserConfig(mi.variant()), os.fspath(scene_file))
+def write_scene_xml(source, out_file, light, material_file) -> None:
+    """Write ``out_file``: the scene ``source`` (an XML path or a scene dict) with
+    its ``dsbrdf`` object reading ``material_file`` and its light replaced by
+    ``light``: {"type": "envmap", "filename"} | {"type": "directional",
+    "direction", "intensity"} | {"type": "point", "position", "intensity"}
+    (direction: object -> light). File names in the written scene are relative
+    to the folder of ``material_file`` (the result's folder); relative file names
+    of the input scene (meshes, textures) are made absolute so that the new scene
+    loads from its own folder."""
+    config = mi.parser.ParserConfig(mi.variant())
+    if isinstance(source, dict):
+        base, state = os.getcwd(), mi.parser.parse_dict(config, source)
+    else:
+        base = os.path.dirname(os.path.abspath(os.fspath(source)))
+        state = mi.parser.parse_file(config, os.fspath(source))
+    folder = os.path.dirname(os.path.abspath(material_file))
     for node in state.nodes:
         props = node.props
         if node.type == mi.ObjectType.BSDF and props.plugin_name() == "dsbrdf":
             for key in list(props.keys()):
                 del props[key]
-            props["filename"] = os.path.relpath(material_file, os.path.dirname(os.path.abspath(out_file)))
+            props["filename"] = os.path.relpath(material_file, folder)
         elif node.type == mi.ObjectType.Emitter:
             for key in list(props.keys()):
                 if key != "to_world" or light["type"] != "envmap":
                     del props[key]
             props.set_plugin_name(light["type"])
             if light["type"] == "envmap":
-                props["filename"] = os.path.relpath(light["filename"], os.path.dirname(os.path.abspath(out_file)))
+                props["filename"] = os.path.relpath(light["filename"], folder)
             elif light["type"] == "directional":
                 props["direction"] = mi.ScalarVector3f(*(-float(v) for v in light["direction"]))
                 props["irradiance"] = mi.ScalarColor3f(*([float(light["intensity"])] * 3))

@@ -1,110 +1,196 @@
-"""``mi-dsbrdf recover``: scene + image -> checked inputs -> inference -> result files.
+"""``mi_dsbrdf.recover`` and ``mi-dsbrdf recover``: scene + image -> checked inputs
+-> inference -> :class:`~mi_dsbrdf.app.result.Result` (-> the result directory).
 
-Result directory (the stable output contract):
-
-    material.json       DSBRDF parameters (``dsbrdf`` plugin ``filename``, ``load_material``)
-    illumination.exr    lat-long map, Mitsuba envmap convention (unseen texels black)   (envmap scenes)
-    light.json          {"type", "direction": unit vector object -> light, "intensity"
-                         (irradiance, or W/sr for a point light, which also has "position")}
-    scene.xml           the input scene with the recovered material and light
-    log.json            what the scene needed and why, every round's posterior terms and time
-    input.png, rerender.png, residual.png, material.png (spheres), illumination.png    previews
+Every check runs before any work and before anything is written; the result
+directory (see :mod:`mi_dsbrdf.app.result`) is written whole or not at all.
 """
 from __future__ import annotations
 
-import json
 import os
+import time
 
 import mitsuba as mi
 import numpy as np
 from tqdm import tqdm
 
-from mi_dsbrdf.app.io import check_image, prepare_out, read_image, read_mask, saturated, save_preview, write_exr
-from mi_dsbrdf.app.outputs import illumination_preview, material_preview, write_scene_xml
+from mi_dsbrdf.app.io import as_mask, check_image, check_out, read_image, read_mask, saturated
+from mi_dsbrdf.app.result import RESULT_FILES, Result
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.light import recover_light
+from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
 from mi_dsbrdf.model.model_file import shipped_model
 
+#: fewest usable pixels inference accepts: 16 reflectance unknowns and up to 3 of
+#: the light; a 3-pixel mask once gave a confident light 17 degrees off
+MIN_PIXELS = 100
 
-def recover_files(scene_file, image_file, out, mask_file=None, force=False, config: Config = None,
-                  progress=True) -> dict:
-    """Run the whole recovery and write the result directory; returns the log dict."""
-    cfg = config or Config()
-    for f, what in ((scene_file, "scene"), (image_file, "image")):
-        if not os.path.exists(f):
-            raise InputError("%s file %s does not exist" % (what, f))
-    image = read_image(image_file)
-    try:
-        scene = mi.load_file(os.fspath(scene_file))
-    except Exception as e:  # noqa: BLE001  (Mitsuba raises RuntimeError subclasses with varied text)
-        raise InputError("scene %s does not load: %s" % (scene_file, str(e).splitlines()[-1])) from None
+
+def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=False) -> Result:
+    """Recover the reflectance and the light of one image of known geometry.
+
+    Parameters
+    ----------
+    scene : path of a Mitsuba scene XML, a scene dict (``mi.load_dict`` form) or an
+        ``mi.Scene``: a camera, exactly one object with a ``dsbrdf`` BSDF and one
+        light (``envmap``, ``directional`` or ``point``) whose values are ignored
+    image : path of a linear HDR image (EXR/HDR), or an (H, W, 3) float array of
+        radiance, film-sized
+    mask : optional path or (H, W) array (bool, or numbers: above half the
+        maximum is used)
+    config : :class:`~mi_dsbrdf.config.Config` (default ``Config()``)
+    progress : None (quiet), True (a tqdm bar per round) or a callable given each
+        logged round (a dict)
+    srgb : linearise an 8-bit image (file or uint8 array) from sRGB instead of
+        refusing it
+
+    Returns
+    -------
+    :class:`~mi_dsbrdf.app.result.Result`; ``.save(folder)`` writes the result directory.
+
+    Raises
+    ------
+    InputError, SceneError, ConfigError : bad input, with a one-line message.
+    """
+    cfg = config if config is not None else Config()
+    if not isinstance(cfg, Config):
+        raise InputError("config must be a mi_dsbrdf.Config, got %s" % type(cfg).__name__)
+    scene, source = _scene(scene)
+    obs, user_mask = load_inputs(image, mask, srgb)
     film = scene.sensors()[0].film().crop_size()
-    check_image(image, (int(film[0]), int(film[1])), image_file)
-    mask = read_mask(mask_file, image.shape[:2]) if mask_file else None
-    prepare_out(out, force)
+    h, w = obs.shape[:2]
+    if (w, h) != (int(film[0]), int(film[1])):
+        raise InputError("%s is %dx%d but the scene's film is %dx%d" % (_name(image), w, h, film[0], film[1]))
     model = shipped_model()
-    needs = decide(scene, image, mask, model.basis.n_lobes, model.basis.n_bases)
+    needs = decide(scene, obs, user_mask, model.basis.n_lobes, model.basis.n_bases)
     obj = dsbrdf_object(scene)
     ts = TexelSum(scene, obj, cfg.map_size if needs.envmap_block else (1, 1), visibility=needs.visibility)
     keep = interior(ts.mask)
-    if mask is not None:
-        keep &= mask
-    keep &= ~saturated(image)
-    if not keep.any():
-        raise InputError("no usable pixel: the object covers no interior, unsaturated pixel inside the mask")
-    bar = tqdm(desc="recover", unit="round") if progress else None
+    if user_mask is not None:
+        keep &= user_mask
+    keep &= ~saturated(obs)
+    if keep.sum() < MIN_PIXELS:
+        raise InputError("only %d usable pixels (on the object, inside the mask, unsaturated, off the silhouette); "
+                         "inference needs at least %d: use a larger image or mask" % (int(keep.sum()), MIN_PIXELS))
+    report, close = _progress(progress)
+    t0 = time.perf_counter()
+    try:
+        if needs.envmap_block:
+            rec = recover_envmap(ts, obs, keep, model, cfg, colour=needs.colour_pass, progress=report)
+            light, lit, L = None, ts, rec.illumination.reshape(-1, 3)
+        else:
+            point = (centre(obj), point_light_distance(scene, obj)) if needs.light == "point" else None
+            rec = recover_light(ts, obs, keep, model, cfg, progress=report, point=point)
+            light = {"type": needs.light, "direction": [float(v) for v in rec.light["direction"]],
+                     "intensity": float(rec.light["intensity"])}
+            if point is not None:
+                light["position"] = [float(v) for v in rec.light["position"]]
+                lit = ts.with_point(rec.light["position"])
+            else:
+                lit = ts.with_directions(np.asarray(rec.light["direction"])[None], [1.0])
+            L = np.full((1, 3), rec.light["intensity"])
+    finally:
+        close()
+    rerender = np.zeros_like(obs)
+    rerender.reshape(-1, 3)[lit.pixels] = LobeSum(lit).render(rec.material, L)
+    rows = rec.log
+    log = {"scene": source if isinstance(source, str) else None,
+           "image": os.fspath(image) if isinstance(image, (str, os.PathLike)) else None,
+           "needs": list(needs.reasons), "rounds": rows, "used_pixels": int(keep.sum()),
+           "seconds": rec.seconds if rows else time.perf_counter() - t0,
+           "unseen_texels": rows[-1].get("unseen_texels") if rows else None}
+    return Result(material=rec.material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
+                  image=obs, used=keep, rerender=rerender, scene_source=source)
+
+
+def recover_files(scene_file, image_file, out, mask_file=None, force=False, config: Config = None,
+                  progress=True, srgb=False) -> Result:
+    """:func:`recover` from files, then :meth:`Result.save` into ``out`` (checked first,
+    so that a bad output folder fails before the work)."""
+    inputs = [f for f in (scene_file, image_file, mask_file) if isinstance(f, (str, os.PathLike))]
+    check_out(out, force, RESULT_FILES, inputs)
+    result = recover(scene_file, image_file, mask=mask_file, config=config, progress=progress, srgb=srgb)
+    result.save(out, force=force, inputs=inputs)
+    return result
+
+
+def load_inputs(image, mask=None, srgb=False) -> tuple:
+    """((H, W, 3) float64 linear image, (H, W) bool mask or None) from paths or
+    arrays, checked (InputError: unreadable, 8-bit without ``srgb``, NaN/Inf,
+    negative, black, a mask of another size or empty)."""
+    obs = _image(image, srgb)
+    check_image(obs, _name(image))
+    if mask is None:
+        return obs, None
+    if isinstance(mask, (str, os.PathLike)):
+        return obs, read_mask(mask, obs.shape[:2])
+    return obs, as_mask(mask, obs.shape[:2])
+
+
+def _name(image) -> str:
+    return os.fspath(image) if isinstance(image, (str, os.PathLike)) else "image"
+
+
+def _scene(scene):
+    """(mi.Scene, its source: the path, the dict, or None)."""
+    if isinstance(scene, mi.Scene):
+        return scene, None
+    if isinstance(scene, dict):
+        try:
+            return mi.load_dict(scene), scene
+        except Exception as e:  # noqa: BLE001  (Mitsuba raises RuntimeError subclasses with varied text)
+            raise InputError("the scene dict does not load: %s" % str(e).splitlines()[-1]) from None
+    if not isinstance(scene, (str, os.PathLike)):
+        raise InputError("scene must be a scene XML path, a scene dict or an mi.Scene, got %s" % type(scene).__name__)
+    path = os.fspath(scene)
+    if not os.path.isfile(path):
+        raise InputError("scene file %s does not exist" % path)
+    try:
+        return mi.load_file(path), path
+    except Exception as e:  # noqa: BLE001
+        raise InputError("scene %s does not load: %s" % (path, str(e).splitlines()[-1])) from None
+
+
+def _image(image, srgb) -> np.ndarray:
+    """(H, W, 3) float64 linear radiance from a path or an array (a copy: the
+    caller's array is never changed)."""
+    if isinstance(image, (str, os.PathLike)):
+        return read_image(image, srgb=srgb)
+    a = np.asarray(image)
+    if a.dtype == np.uint8 or a.dtype == np.uint16:
+        if not srgb:
+            raise InputError("image is a %s array (display values, not radiance): give linear float radiance, "
+                             "or pass srgb=True to linearise it from sRGB" % a.dtype)
+        a = srgb_to_linear(a / float(np.iinfo(a.dtype).max))
+    if not np.issubdtype(a.dtype, np.number) or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (1, 3, 4)):
+        raise InputError("image must be an (H, W, 3) array of radiance, got %s of shape %s" % (a.dtype, a.shape))
+    a = np.array(a, dtype=np.float64)
+    if a.ndim == 2:
+        a = a[..., None]
+    return np.repeat(a, 3, axis=2) if a.shape[2] == 1 else a[..., :3].copy()
+
+
+def srgb_to_linear(v) -> np.ndarray:
+    """The sRGB transfer function inverted (IEC 61966-2-1), on values in [0, 1]."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def _progress(progress):
+    """(called with each logged row, closes the bar)."""
+    if progress is None or progress is False:
+        return None, lambda: None
+    if callable(progress):
+        return progress, lambda: None
+    bar = tqdm(desc="recover", unit="round")
 
     def report(row):
-        if bar is not None:
-            bar.set_postfix(nlp="%.4g" % row["neg_log_posterior"], refresh=False)
-            bar.update()
-
-    if needs.envmap_block:
-        result = recover_envmap(ts, image, keep, model, cfg, colour=needs.colour_pass, progress=report)
-        light = {"type": "envmap", "filename": os.path.join(out, "illumination.exr")}
-        write_exr(light["filename"], result.illumination)
-        illumination_preview(result.illumination, os.path.join(out, "illumination.png"), seen=result.seen)
-        lit, L = ts, result.illumination.reshape(-1, 3)
-    else:
-        point = None
-        if needs.light == "point":
-            point = (centre(obj), point_light_distance(scene, obj))
-        result = recover_light(ts, image, keep, model, cfg, progress=report, point=point)
-        light = {"type": needs.light, "direction": [float(v) for v in result.light["direction"]],
-                 "intensity": result.light["intensity"]}
-        if point is not None:
-            light["position"] = [float(v) for v in result.light["position"]]
-            lit = ts.with_point(result.light["position"])
-        else:
-            lit = ts.with_directions(np.asarray(result.light["direction"])[None], [1.0])
-        with open(os.path.join(out, "light.json"), "w") as f:
-            json.dump(light, f, indent=1)
-        L = np.full((1, 3), result.light["intensity"])
-    if bar is not None:
-        bar.close()
-    material_file = os.path.join(out, "material.json")
-    result.material.save(material_file)
-    write_scene_xml(scene_file, os.path.join(out, "scene.xml"), material_file, light)
-    material_preview(material_file, os.path.join(out, "material.png"))
-    # previews: input, re-render with the recovered parameters, residual
-    lit = lit.with_bsdf(mi.load_dict({"type": "dsbrdf", "filename": material_file}))
-    rerender = np.zeros_like(image)
-    rerender.reshape(-1, 3)[lit.pixels] = lit.render(L)
-    save_preview(image.astype(np.float32), os.path.join(out, "input.png"))
-    save_preview(rerender.astype(np.float32), os.path.join(out, "rerender.png"))
-    resid = np.abs(np.log(rerender + 1e-3 * image.mean()) - np.log(image + 1e-3 * image.mean()))
-    save_preview((resid * keep[..., None]).astype(np.float32), os.path.join(out, "residual.png"))
-    rows = result.log
-    log = {"scene": os.fspath(scene_file), "image": os.fspath(image_file), "needs": list(needs.reasons),
-           "rounds": rows, "seconds": result.seconds, "light": light,
-           "unseen_texels": rows[-1].get("unseen_texels") if rows else None}
-    with open(os.path.join(out, "log.json"), "w") as f:
-        json.dump(log, f, indent=1, default=float)
-    return log
+        bar.set_postfix(nlp="%.4g" % row["neg_log_posterior"], refresh=False)
+        bar.update()
+    return report, bar.close
 
 
 def interior(mask) -> np.ndarray:

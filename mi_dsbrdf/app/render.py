@@ -7,55 +7,167 @@ import time
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.io import save_preview, write_exr
+from mi_dsbrdf.app.io import read_image, save_preview, staged_file, write_exr
 from mi_dsbrdf.app.scenes import camera, shape_dict
+from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.model.library import library_names
 
 
 def render_scene(scene_file, spp=None, **params) -> np.ndarray:
     """Render a scene XML (with ``<default>`` overrides ``params``) to (H, W, 3) float32."""
-    scene = mi.load_file(os.fspath(scene_file), **{k: str(v) for k, v in params.items()})
-    img = mi.render(scene, spp=spp or 0)
-    img = np.array(img, dtype=np.float32)
-    if not np.all(np.isfinite(img)):
-        raise FloatingPointError("render of %s produced non-finite pixels" % scene_file)
+    try:
+        scene = mi.load_file(os.fspath(scene_file), **{k: str(v) for k, v in params.items()})
+    except Exception as e:  # noqa: BLE001  (Mitsuba raises RuntimeError subclasses with varied text)
+        raise InputError("scene %s does not load: %s" % (scene_file, str(e).splitlines()[-1])) from None
+    img = np.array(mi.render(scene, spp=spp or 0), dtype=np.float32)
+    bad = ~np.isfinite(img)
+    if bad.any():
+        raise InputError("render of %s has %d non-finite pixels: check its emitters and textures for NaN/Inf"
+                         % (scene_file, int(bad.any(axis=2).sum())))
     return img
 
 
-def render_to_files(scene_file, out_stem, spp=None, **params) -> dict:
-    """Render and write ``<out_stem>.exr`` and ``<out_stem>.png``; returns paths and time."""
+def render_to_files(scene_file, out, spp=None, force=False, **params) -> dict:
+    """Render into the folder ``out`` (made when the render succeeded):
+    ``<scene name>.exr`` and ``.png``, replacing earlier ones only with ``force``;
+    returns paths and time."""
+    stem = os.path.join(os.fspath(out), os.path.splitext(os.path.basename(os.fspath(scene_file)))[0])
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise InputError("output %s is a file, not a folder: choose a folder name" % out)
+    for f in (stem + ".exr", stem + ".png"):
+        if os.path.exists(f) and not force:
+            raise InputError("%s exists; pass --force to replace it" % f)
     t0 = time.perf_counter()
     img = render_scene(scene_file, spp=spp, **params)
     seconds = time.perf_counter() - t0
-    write_exr(out_stem + ".exr", img)
-    save_preview(img, out_stem + ".png")
-    return {"exr": out_stem + ".exr", "png": out_stem + ".png", "seconds": seconds}
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as e:
+        raise InputError("cannot make the output folder %s: %s" % (out, e.strerror)) from None
+    write_files(img, stem + ".exr", force)
+    return {"exr": stem + ".exr", "png": stem + ".png", "seconds": seconds}
 
 
-def relight(material_file, envmap_file, out_file, shape="sphere", res=256, spp=64) -> dict:
-    """Render a recovered (or library) material on ``shape`` under a lat-long
-    ``envmap_file`` with Mitsuba's path tracer; writes ``out_file`` (EXR) and a
-    PNG beside it. ``material_file``: a material.json or a library name."""
-    bsdf = {"type": "dsbrdf"}
-    if os.path.exists(os.fspath(material_file)):
-        bsdf["filename"] = os.path.abspath(os.fspath(material_file))
-    elif str(material_file) in library_names():
-        bsdf["material"] = str(material_file)
+def write_files(img, exr, force=False) -> str:
+    """Write ``img`` as the EXR ``exr`` and an sRGB PNG beside it, each through a
+    temporary file moved into place (an error leaves neither half-written);
+    returns the PNG's path."""
+    png = os.path.splitext(os.fspath(exr))[0] + ".png"
+    tmp_exr, tmp_png = staged_file(exr, force), staged_file(png, force)
+    try:
+        write_exr(tmp_exr, img)
+        save_preview(img, tmp_png)
+        os.replace(tmp_exr, exr)
+        os.replace(tmp_png, png)
+    finally:
+        for f in (tmp_exr, tmp_png):
+            if os.path.exists(f):
+                os.remove(f)
+    return png
+
+
+def relight(material, out_file, envmap=None, shape="sphere", scene=None, shape_id=None, res=256, spp=64,
+            force=False) -> dict:
+    """Render a recovered (or library) material and write ``out_file`` (EXR) and a PNG beside it.
+
+    Either on ``shape`` (``sphere``, ``torus`` or a .ply/.obj mesh) under the
+    lat-long map ``envmap`` with Mitsuba's path tracer (a ``res`` x ``res`` film),
+    or in the user's own ``scene`` XML with the material on its shape of id
+    ``shape_id`` (its camera, film, integrator and lights as written; ``res`` is
+    not used). ``material``: a material.json or a library name. Both files
+    appear only when the render succeeded.
+    """
+    bsdf = material_dict(material)
+    spp = _positive(spp, "spp")
+    if scene is not None:
+        if envmap is not None:
+            raise InputError("give an envmap or a scene, not both: the scene brings its own lights")
+        if shape_id is None:
+            raise InputError("a scene needs --shape-id: the id of the shape that gets the material")
+        mi_scene = scene_with_material(scene, shape_id, bsdf)
     else:
-        raise InputError("material %s is neither a file nor a library material" % material_file)
-    if not os.path.exists(os.fspath(envmap_file)):
-        raise InputError("envmap %s does not exist" % envmap_file)
-    obj = shape_dict(shape, bsdf)
-    scene = mi.load_dict({
-        "type": "scene", "integrator": {"type": "path", "max_depth": 4},
-        "sensor": camera(res, 32, box_filter=False),
-        "object": obj, "emitter": {"type": "envmap", "filename": os.path.abspath(os.fspath(envmap_file))}})
+        if envmap is None:
+            raise InputError("give an envmap (a lat-long HDR/EXR map) or a scene to relight in")
+        res = _positive(res, "res")
+        check_envmap(envmap)
+        mi_scene = mi.load_dict({
+            "type": "scene", "integrator": {"type": "path", "max_depth": 4},
+            "sensor": camera(res, 32, box_filter=False),
+            "object": shape_dict(shape, bsdf), "emitter": {"type": "envmap",
+                                                           "filename": os.path.abspath(os.fspath(envmap))}})
+    for f in (out_file, os.path.splitext(os.fspath(out_file))[0] + ".png"):
+        staged_file(f, force)           # checked before the render
     t0 = time.perf_counter()
-    img = np.array(mi.render(scene, spp=spp), dtype=np.float32)
+    img = np.array(mi.render(mi_scene, spp=spp), dtype=np.float32)
     if not np.all(np.isfinite(img)):
         raise FloatingPointError("relighting produced non-finite pixels")
-    write_exr(out_file, img)
-    png = os.path.splitext(os.fspath(out_file))[0] + ".png"
-    save_preview(img, png)
-    return {"exr": os.fspath(out_file), "png": png, "seconds": time.perf_counter() - t0}
+    seconds = time.perf_counter() - t0
+    png = write_files(img, out_file, force)
+    return {"exr": os.fspath(out_file), "png": png, "seconds": seconds}
+
+
+def material_dict(material) -> dict:
+    """The ``dsbrdf`` plugin dict of a material.json or a library name, the
+    material loaded and checked here first (one-line MaterialError/InputError)."""
+    path = os.fspath(material)
+    if os.path.exists(path):
+        Material.load(path)
+        return {"type": "dsbrdf", "filename": os.path.abspath(path)}
+    if path in library_names():
+        return {"type": "dsbrdf", "material": path}
+    raise InputError("material %s is neither a file nor a library material" % path)
+
+
+def check_envmap(path) -> None:
+    """InputError unless ``path`` is a lat-long map of finite, non-negative radiance."""
+    L = read_image(path, what="envmap")
+    bad = ~np.isfinite(L)
+    if bad.any():
+        raise InputError("envmap %s has %d NaN/Inf values (first at texel %s)" % (
+            os.fspath(path), int(bad.sum()), tuple(int(v) for v in np.argwhere(bad)[0][:2][::-1])))
+    if (L < 0).any():
+        raise InputError("envmap %s has %d negative values: radiance is >= 0" % (os.fspath(path), int((L < 0).sum())))
+    if L.shape[1] < 2 * L.shape[0] - 2 or L.shape[1] > 2 * L.shape[0] + 2:
+        raise InputError("envmap %s is %dx%d: a lat-long map is twice as wide as high" % (
+            os.fspath(path), L.shape[1], L.shape[0]))
+
+
+def scene_with_material(scene_file, shape_id, bsdf) -> "mi.Scene":
+    """The user's scene XML with the shape of id ``shape_id`` given the BSDF ``bsdf``
+    (a plugin dict); its other objects, including a BSDF it shared, are unchanged."""
+    if not os.path.isfile(os.fspath(scene_file)):
+        raise InputError("scene file %s does not exist" % os.fspath(scene_file))
+    config = mi.parser.ParserConfig(mi.variant())
+    try:
+        state = mi.parser.parse_file(config, os.fspath(scene_file))
+    except Exception as e:  # noqa: BLE001  (Mitsuba raises RuntimeError subclasses with varied text)
+        raise InputError("scene %s does not parse: %s" % (scene_file, str(e).splitlines()[-1])) from None
+    shapes = [i for i, n in enumerate(state.nodes) if n.type == mi.ObjectType.Shape]
+    ids = [state.nodes[i].props.id() for i in shapes]
+    if shape_id not in ids:
+        raise InputError("scene %s has no shape with id %r; its shapes' ids: %s" % (
+            scene_file, shape_id, ", ".join(repr(i) for i in ids if i) or "none (add id=\"...\" to a shape)"))
+    props = state.nodes[shapes[ids.index(shape_id)]].props
+    for key in list(props.keys()):      # drop the shape's own BSDF reference (a shared BSDF stays for the others)
+        if props.type(key) == mi.Properties.Type.ResolvedReference and \
+                state.nodes[props[key].index()].type == mi.ObjectType.BSDF:
+            del props[key]
+    node = mi.parser.SceneNode()
+    node.type = mi.ObjectType.BSDF
+    node.props = mi.Properties("dsbrdf")
+    for key, value in bsdf.items():
+        if key != "type":
+            node.props[key] = value
+    state.nodes.append(node)
+    props["bsdf_relit"] = mi.Properties.ResolvedReference(len(state.nodes) - 1)
+    try:
+        return mi.parser.instantiate(config, state)
+    except Exception as e:  # noqa: BLE001
+        raise InputError("scene %s does not load: %s" % (scene_file, str(e).splitlines()[-1])) from None
+
+
+def _positive(value, name) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= 16384:
+        raise InputError("%s must be an integer from 1 to 16384, got %r" % (name, value))
+    return value

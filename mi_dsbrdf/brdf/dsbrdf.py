@@ -10,8 +10,8 @@ in kappa). Values are in 1/sr.
 float64 evaluation (:meth:`Material.eval`) is the reference the tests hold the
 Dr.Jit plugin (``plugins/dsbrdf.py``) to.
 
-Numerical guards, identical in both backends: log kappa <= log 85 (exp overflows
-float32 past 88), gamma in [1e-4, 1e6], cos theta_h >= 1e-30 (finite gradients
+Numerical guards, identical in both backends: log kappa <= log 60 (values and
+derivatives finite in float32, see KAPPA_MAX), gamma in [1e-4, 1e6], cos theta_h >= 1e-30 (finite gradients
 at theta_h = 90 deg), and a stable expm1 for tiny kappa.
 """
 from __future__ import annotations
@@ -28,7 +28,10 @@ from mi_dsbrdf.brdf.xp import expm1, ops
 from mi_dsbrdf.errors import MaterialError
 
 MAX_LOBES = 3
-KAPPA_MAX = 85.0
+#: kappa <= 60 keeps every derivative of a lobe finite in float32: the chain rule
+#: multiplies e^kappa by kappa gamma (<= 1e6), and e^60 * 60 * 1e6 = 7e33 < 3.4e38
+#: (at 85 the NaN/Inf reached 0.26 deg around the peak); the library's kappa stay below 11
+KAPPA_MAX = 60.0
 GAMMA_MIN, GAMMA_MAX = 1e-4, 1e6
 COS_H_MIN = 1e-30
 LOG_KAPPA_MAX = math.log(KAPPA_MAX)
@@ -51,7 +54,7 @@ def lobe_curves(theta_d, log_kappa, log_gamma, knots=DEFAULT_KNOTS):
 
 
 def clamp_controls(log_kappa, log_gamma):
-    """Control values clamped into the valid range (log kappa <= log 85, gamma in
+    """Control values clamped into the valid range (log kappa <= log 60, gamma in
     [1e-4, 1e6]): how a point of a learned basis, which is unbounded, becomes a
     material. numpy arrays or Dr.Jit arrays; the fit applies the same clamp, so a
     fitted psi is the material it was fitted as."""
@@ -118,7 +121,7 @@ class Material:
         except ValueError as e:
             raise MaterialError(str(e)) from None
         if np.any(self.log_kappa > LOG_KAPPA_MAX + 1e-9):
-            raise MaterialError("kappa must be <= %g (float32 exp overflows past 88); largest control value is %g"
+            raise MaterialError("kappa must be <= %g (beyond, its derivatives overflow float32); largest control value is %g"
                                 % (KAPPA_MAX, math.exp(self.log_kappa.max())))
         if np.any(self.log_gamma < LOG_GAMMA_MIN - 1e-9) or np.any(self.log_gamma > LOG_GAMMA_MAX + 1e-9):
             raise MaterialError("gamma control values must lie in [%g, %g], got [%g, %g]" % (

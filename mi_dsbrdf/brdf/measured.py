@@ -85,6 +85,9 @@ class MeasuredBRDF:
         if not np.all(np.isfinite(table)):
             raise MeasuredFileError("measured BRDF %s has non-finite values" % (name or ""))
         self.measured = np.all(table >= 0, axis=-1) if measured is None else np.asarray(measured, bool)
+        if not self.measured.any():
+            raise MeasuredFileError("measured BRDF %s has no measured value (every cell is negative: unmeasured)"
+                                    % (name or ""))
         self.table = np.where(self.measured[..., None], np.maximum(table, 0), 0).astype(np.float32)
         self.name = name
 

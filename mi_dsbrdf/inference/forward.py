@@ -261,7 +261,7 @@ def transport_adjoint(T, grad_pixels) -> np.ndarray:
 
 def unit_scaled(values) -> tuple:
     """((N, 3) float32 values / s, s) with s the largest |value|: the float32 products
-    of a bright sun (1e5) with a sharp lobe's transport (e^85 * solid angle) would
+    of a bright sun (1e5) with a sharp lobe's transport (e^60 * solid angle) would
     overflow; scaled to at most 1 they cannot."""
     v = np.asarray(values, dtype=np.float64).reshape(-1, 3)
     s = float(np.abs(v).max()) if v.size else 0.0

@@ -97,7 +97,7 @@ class Posterior:
             self.refl = PixelView(self.view, obs, keep, 1.0)
         # the range of the library's kappa/gamma control values: a recovered curve
         # stays within CURVE_MARGIN of it (one image sees few theta_d; without this
-        # box the unobserved, grazing end of a curve can run off to kappa = e^85)
+        # box the unobserved, grazing end of a curve can run off to kappa = e^60)
         ctrl = np.stack([model.basis.control_values(model.library_material(n).psi) for n in model.library])
         self.curve_range = (ctrl.min(axis=0).reshape(-1) - CURVE_MARGIN, ctrl.max(axis=0).reshape(-1) + CURVE_MARGIN)
         c0 = model.basis.control_values(np.zeros(self.k)).reshape(-1)      # control values are linear in psi
@@ -147,7 +147,7 @@ class Posterior:
     def curve_penalty(self, psi) -> tuple:
         """(value, gradient, Gauss-Newton Hessian) of CURVE_PENALTY * sum of the squared
         excess of the kappa/gamma control values beyond ``curve_range``: ψ far from
-        the data can put a curve's unobserved (grazing) end at kappa = e^85."""
+        the data can put a curve's unobserved (grazing) end at kappa = e^60."""
         c0, A = self.curve_map
         c = c0 + A @ psi
         excess = np.maximum(c - self.curve_range[1], 0) - np.maximum(self.curve_range[0] - c, 0)

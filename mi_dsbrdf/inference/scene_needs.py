@@ -48,7 +48,10 @@ def light_kind(emitter) -> str:
     if mi.has_flag(flags, mi.EmitterFlags.DeltaDirection):
         return "directional"
     if mi.has_flag(flags, mi.EmitterFlags.DeltaPosition):
-        return "point"
+        if "PointLight" in name:
+            return "point"
+        raise SceneError("a %s is not supported (its emission depends on direction): use a point light at its "
+                         "position, a directional light or an envmap" % name.strip())
     raise SceneError("the light must be an envmap, a point or a directional emitter; got %s" % name.strip())
 
 

@@ -34,6 +34,10 @@ class Samples:
         return self.theta_h.shape[0]
 
 
+#: fewest measured samples a material is fitted to (a 3-lobe fit has 39 unknowns)
+MIN_SAMPLES = 200
+
+
 def grid_subset(theta_d_step=3, phi_d_step=20):
     """Indices (i_h, j_d, k_p) of MERL grid cells used for fitting.
 
@@ -56,6 +60,9 @@ def samples_from_table(brdf, subset=None) -> Samples:
     ih, jd, kp = grid_subset() if subset is None else subset
     keep = brdf.measured[ih, jd, kp]
     ih, jd, kp = ih[keep], jd[keep], kp[keep]
+    if ih.size < MIN_SAMPLES:
+        raise MeasuredFileError("%s has %d measured values on the fitting grid; a fit needs at least %d"
+                                % (brdf.name or "the measured BRDF", ih.size, MIN_SAMPLES))
     return _samples(ih, jd, kp, brdf.table[ih, jd, kp].astype(np.float64), brdf.name)
 
 

@@ -1,0 +1,107 @@
+"""What :func:`mi_dsbrdf.recover` returns, and the result directory it saves.
+
+Result directory (the stable output contract, written by :meth:`Result.save`
+and ``mi-dsbrdf recover``):
+
+    material.json       DSBRDF parameters (``dsbrdf`` plugin ``filename``, ``load_material``)
+    illumination.exr    lat-long map, Mitsuba envmap convention (unseen texels black)   (envmap scenes)
+    light.json          {"type", "direction": unit vector object -> light, "intensity"
+                         (irradiance, or W/sr for a point light, which also has "position")}
+    scene.xml           the input scene with the recovered material and light (when the
+                        scene came from a file or a dict, not an ``mi.Scene``)
+    log.json            what the scene needed and why, every round's posterior terms and time
+    input.png, rerender.png, residual.png, material.png (spheres), illumination.png    previews
+
+The folder is written whole or not at all (:func:`~mi_dsbrdf.app.io.staged_output`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import numpy as np
+
+from mi_dsbrdf.app.io import save_preview, staged_output, write_exr
+from mi_dsbrdf.app.outputs import illumination_preview, material_preview, write_scene_xml
+from mi_dsbrdf.brdf.dsbrdf import Material
+
+#: every file a result directory can hold (``--force`` replaces only such a folder)
+RESULT_FILES = ("material.json", "illumination.exr", "light.json", "scene.xml", "log.json", "input.png",
+                "rerender.png", "residual.png", "material.png", "illumination.png")
+
+
+@dataclasses.dataclass(frozen=True)
+class Result:
+    """The recovered material and light of one image (plain fields, like scipy's results).
+
+    Attributes
+    ----------
+    material : the recovered :class:`~mi_dsbrdf.brdf.dsbrdf.Material`
+    light : {"type": "directional" | "point", "direction": (3,) unit vector from
+        the object towards the light, "intensity": irradiance or W/sr,
+        "position": (3,) for a point light}; None under an illumination map
+    illumination : (H, W, 3) float64 lat-long radiance map (Mitsuba's envmap
+        convention; texels no pixel sees are 0), or None for a point or
+        directional light
+    seen : (H, W) bool texels some observed pixel sees, or None
+    log : {"needs": one line per decision about the scene, "rounds": one dict
+        per logged round (posterior terms, seconds), "seconds", ...}
+    image : (H, W, 3) float64 observed image (linear); used : (H, W) bool, the
+        pixels inference used; rerender : (H, W, 3) float64, the image under the
+        recovered material and light (the inference's forward model)
+    scene_source : the scene file (str) or dict it came from, rewritten into
+        ``scene.xml`` by :meth:`save`; None for an ``mi.Scene``
+    """
+    material: Material
+    light: dict
+    illumination: np.ndarray
+    seen: np.ndarray
+    log: dict
+    image: np.ndarray
+    used: np.ndarray
+    rerender: np.ndarray
+    scene_source: object = None
+
+    @property
+    def seconds(self) -> float:
+        return float(self.log["seconds"])
+
+    def save(self, out, force=False, inputs=()) -> str:
+        """Write the result directory ``out`` (see the module doc) and return its path.
+
+        ``out`` must not exist or be empty, or, with ``force``, hold an earlier
+        result (nothing else); ``inputs`` are files that must not lie inside it.
+        Written into a fresh folder that replaces ``out`` at the end: an error
+        or an interruption leaves ``out`` as it was.
+        """
+        out = os.path.abspath(os.fspath(out))
+        sources = tuple(inputs) + ((self.scene_source,) if isinstance(self.scene_source, (str, os.PathLike)) else ())
+        with staged_output(out, force, RESULT_FILES, sources) as tmp:
+            self._write(tmp, out)
+        return out
+
+    def _write(self, tmp, out):
+        """Files into ``tmp``; paths inside them name their final folder ``out``."""
+        material_file = os.path.join(tmp, "material.json")
+        self.material.save(material_file)
+        if self.illumination is not None:
+            write_exr(os.path.join(tmp, "illumination.exr"), self.illumination)
+            illumination_preview(self.illumination, os.path.join(tmp, "illumination.png"), seen=self.seen)
+            light = {"type": "envmap", "filename": os.path.join(out, "illumination.exr")}
+        else:
+            light = self.light
+            with open(os.path.join(tmp, "light.json"), "w") as f:
+                json.dump(light, f, indent=1)
+        if self.scene_source is not None:
+            write_scene_xml(self.scene_source, os.path.join(tmp, "scene.xml"), light,
+                            material_file=os.path.join(out, "material.json"))
+        material_preview(material_file, os.path.join(tmp, "material.png"))
+        save_preview(self.image.astype(np.float32), os.path.join(tmp, "input.png"))
+        save_preview(self.rerender.astype(np.float32), os.path.join(tmp, "rerender.png"))
+        eps = 1e-3 * self.image.mean()
+        resid = np.abs(np.log(self.rerender + eps) - np.log(self.image + eps)) * self.used[..., None]
+        save_preview(resid.astype(np.float32), os.path.join(tmp, "residual.png"))
+        with open(os.path.join(tmp, "log.json"), "w") as f:
+            json.dump(dict(self.log, light=light), f, indent=1, default=float)
+
