@@ -138,8 +138,18 @@ def check_out(out, force=False, ours=(), inputs=()) -> None:
     parent = os.path.dirname(os.path.abspath(out))
     while not os.path.exists(parent):
         parent = os.path.dirname(parent)
-    if not os.path.isdir(parent) or not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError("cannot write into %s: permission denied" % parent)
+    _probe(parent)
+
+
+def _probe(folder) -> None:
+    """InputError unless a folder can be made in ``folder`` (tried, not guessed from
+    permission bits: root passes those, and /proc or a read-only mount do not)."""
+    if not os.path.isdir(folder):
+        raise InputError("cannot write into %s: not a folder" % folder)
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".mi-dsbrdf-probe-", dir=folder))
+    except OSError as e:
+        raise InputError("cannot write into %s: %s" % (folder, e.strerror)) from None
 
 
 @contextlib.contextmanager
@@ -184,8 +194,7 @@ def staged_file(out_file, force=False):
     folder = os.path.dirname(out_file)
     if not os.path.isdir(folder):
         raise InputError("folder %s of the output does not exist" % folder)
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError("cannot write into %s: permission denied" % folder)
+    _probe(folder)
     stem, ext = os.path.splitext(os.path.basename(out_file))
     return os.path.join(folder, ".%s.partial%s" % (stem, ext))
 

@@ -36,6 +36,8 @@ def write_scene_xml(source, out_file, light, material_file) -> None:
     folder = os.path.dirname(os.path.abspath(material_file))
     for node in state.nodes:
         props = node.props
+        if props.plugin_name() in ("dsbrdf", "merl") and node.type == mi.ObjectType.Unknown:
+            node.type = mi.ObjectType.BSDF         # a dict names no tag, and the parser knows no Python plugin
         if node.type == mi.ObjectType.BSDF and props.plugin_name() == "dsbrdf":
             for key in list(props.keys()):
                 del props[key]

@@ -29,6 +29,9 @@ from mi_dsbrdf.errors import InputError
 
 #: the fitted circle must cover the outline this well (intersection over union)
 MIN_IOU = 0.9
+#: the outline's largest rms distance from the fitted circle: this many pixels, or
+#: this fraction of the radius if larger
+OUTLINE_RMS, OUTLINE_RMS_RELATIVE = 0.5, 0.02
 #: fewest outline pixels a circle is fitted to
 MIN_OUTLINE = 12
 LIGHTS = ("envmap", "directional", "point")
@@ -44,37 +47,47 @@ def object_pixels(image) -> np.ndarray:
     return lum > 0.01 * top
 
 
-def fit_circle(mask) -> tuple:
+def fit_circle(mask, given=True) -> tuple:
     """(cx, cy, r) in pixels (x right, y down, pixel centres at +0.5) of the disc
-    ``mask`` (H, W bool) shows; InputError if it is not a disc.
+    ``mask`` (H, W bool) shows; InputError if it is not a disc (``given``: the
+    user's mask, else the image's non-black pixels, which the message says).
 
-    Inside the frame, the centroid and the area give the disc exactly; a disc cut
-    by the frame is fitted by algebraic least squares (Kasa) to its outline
-    pixels away from the frame.
+    A circle is fitted by algebraic least squares (Kasa) to the outline pixels
+    away from the frame; inside the frame the centroid and the area give the disc
+    more precisely. The outline must lie within OUTLINE_RMS of the circle (a
+    rasterised disc: 0.25 px; a sphere's lit part under one light, its
+    terminator taken for the outline: 0.85 px at r = 17) and the circle must
+    cover the mask (MIN_IOU).
     """
     m = np.asarray(mask, bool)
     h, w = m.shape
     ys, xs = np.nonzero(m)
     if xs.size < MIN_OUTLINE:
         raise InputError("the sphere covers %d pixels: too few to fit its outline" % xs.size)
+    inner = m.copy()
+    for axis in (0, 1):
+        for shift in (1, -1):
+            inner &= np.roll(m, shift, axis=axis)
+    edge = m & ~inner
+    edge[0], edge[-1], edge[:, 0], edge[:, -1] = False, False, False, False
+    ey, ex = np.nonzero(edge)
+    if ex.size < MIN_OUTLINE:
+        raise InputError("the sphere's outline inside the frame has %d pixels: too few to fit it" % ex.size)
+    x, y = ex + 0.5, ey + 0.5
+    (a, b, c), *_ = np.linalg.lstsq(np.stack([x, y, np.ones_like(x)], axis=1), x * x + y * y, rcond=None)
+    cx, cy = a / 2, b / 2
+    r = math.sqrt(max(c + cx * cx + cy * cy, 0.0))
+    rms = float(np.sqrt(np.mean((np.hypot(x - cx, y - cy) - r) ** 2)))
+    if rms > max(OUTLINE_RMS, OUTLINE_RMS_RELATIVE * r):
+        raise InputError("the %s outline is not a circle (%.2g px rms from the best one): is it a sphere? %s" % (
+            ("mask's", rms, "") if given else
+            ("object's", rms, "Without a mask the outline is where the image turns black, and a sphere's unlit side "
+                              "is black too: give a mask of the sphere")))
     on_frame = m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any()
-    if not on_frame:
-        cx, cy, r = xs.mean() + 0.5, ys.mean() + 0.5, math.sqrt(xs.size / math.pi)
+    if on_frame:
+        r += 0.5                       # outline pixel centres lie half a pixel inside the disc
     else:
-        inner = m.copy()
-        for axis in (0, 1):
-            for shift in (1, -1):
-                inner &= np.roll(m, shift, axis=axis)
-        edge = m & ~inner
-        edge[0], edge[-1], edge[:, 0], edge[:, -1] = False, False, False, False
-        ey, ex = np.nonzero(edge)
-        if ex.size < MIN_OUTLINE:
-            raise InputError("the sphere's outline inside the frame has %d pixels: too few to fit it" % ex.size)
-        x, y = ex + 0.5, ey + 0.5
-        A = np.stack([x, y, np.ones_like(x)], axis=1)
-        (a, b, c), *_ = np.linalg.lstsq(A, x * x + y * y, rcond=None)
-        cx, cy = a / 2, b / 2
-        r = math.sqrt(max(c + cx * cx + cy * cy, 0.0)) + 0.5     # outline pixel centres lie half a pixel inside
+        cx, cy, r = xs.mean() + 0.5, ys.mean() + 0.5, math.sqrt(xs.size / math.pi)
     yy, xx = np.mgrid[0:h, 0:w]
     disc = (xx + 0.5 - cx) ** 2 + (yy + 0.5 - cy) ** 2 <= r * r
     iou = (disc & m).sum() / max((disc | m).sum(), 1)
@@ -136,5 +149,5 @@ def photo_scene(image, mask=None, light="envmap", fov=None, srgb=False) -> tuple
     outline is fitted to the mask, or to the image's non-black pixels."""
     img, m = load_inputs(image, mask, srgb)
     h, w = img.shape[:2]
-    circle = fit_circle(m if m is not None else object_pixels(img))
+    circle = fit_circle(m, given=True) if m is not None else fit_circle(object_pixels(img), given=False)
     return sphere_scene((w, h), circle, light=light, fov=fov), circle

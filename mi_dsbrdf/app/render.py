@@ -141,6 +141,7 @@ def scene_with_material(scene_file, shape_id, bsdf) -> "mi.Scene":
     config = mi.parser.ParserConfig(mi.variant())
     try:
         state = mi.parser.parse_file(config, os.fspath(scene_file))
+        mi.parser.transform_all(config, state)      # references resolved, as instantiate needs them
     except Exception as e:  # noqa: BLE001  (Mitsuba raises RuntimeError subclasses with varied text)
         raise InputError("scene %s does not parse: %s" % (scene_file, str(e).splitlines()[-1])) from None
     shapes = [i for i, n in enumerate(state.nodes) if n.type == mi.ObjectType.Shape]
@@ -148,10 +149,20 @@ def scene_with_material(scene_file, shape_id, bsdf) -> "mi.Scene":
     if shape_id not in ids:
         raise InputError("scene %s has no shape with id %r; its shapes' ids: %s" % (
             scene_file, shape_id, ", ".join(repr(i) for i in ids if i) or "none (add id=\"...\" to a shape)"))
-    props = state.nodes[shapes[ids.index(shape_id)]].props
+    index = shapes[ids.index(shape_id)]
+
+    def target(props, key):
+        """Index of the node a reference of ``props`` names (by id or resolved), or None."""
+        kind = props.type(key)
+        if kind == mi.Properties.Type.ResolvedReference:
+            return props[key].index()
+        if kind == mi.Properties.Type.Reference:
+            return state.id_to_index.get(props[key].id())
+        return None
+    props = state.nodes[index].props
     for key in list(props.keys()):      # drop the shape's own BSDF reference (a shared BSDF stays for the others)
-        if props.type(key) == mi.Properties.Type.ResolvedReference and \
-                state.nodes[props[key].index()].type == mi.ObjectType.BSDF:
+        i = target(props, key)
+        if i is not None and state.nodes[i].type == mi.ObjectType.BSDF:
             del props[key]
     node = mi.parser.SceneNode()
     node.type = mi.ObjectType.BSDF
@@ -160,7 +171,8 @@ def scene_with_material(scene_file, shape_id, bsdf) -> "mi.Scene":
         if key != "type":
             node.props[key] = value
     state.nodes.append(node)
-    props["bsdf_relit"] = mi.Properties.ResolvedReference(len(state.nodes) - 1)
+    # fetched again: appending may move the nodes, and a reference taken before would dangle
+    state.nodes[index].props["bsdf_relit"] = mi.Properties.ResolvedReference(len(state.nodes) - 1)
     try:
         return mi.parser.instantiate(config, state)
     except Exception as e:  # noqa: BLE001
