@@ -13,8 +13,9 @@ Two disjoint sets of materials and probes:
 * **validation** (:data:`VALIDATION_MATERIALS` x :data:`VALIDATION_PROBES`): the
   only cases settings and weights are chosen on (``--set validation
   --config w_entropy=300 ...`` runs one setting into its own folder under
-  ``validation/``; ``--choose`` scores every setting there (:data:`SWEEP`),
-  ``defaults`` being the shipped code, and writes the choice);
+  ``validation/``; ``--choose`` scores the settings of ``validation_sweep/``
+  (:data:`SWEEP`) and the shipped code's ``validation/defaults``, and writes
+  the choice);
 * **report** (:data:`REPORT_MATERIALS` x :data:`REPORT_PROBES`): 12 materials
   spanning the four GMM clusters of the shipped model, 6 probes; run once with
   the shipped defaults, with principled + Adam and DSBRDF + Adam through
@@ -190,11 +191,10 @@ def summary(folder) -> str:
 #: the measures a setting is chosen on (BRDF, illumination and what a user sees)
 CHOICE_MEASURES = ("brdf_eq20_paper", "illumination_error", "relight")
 CHOICE = os.path.join(OUT, "validation_choice.json")
-#: the settings the choice is made among: every complete setting under
-#: ``validation/`` (``defaults`` is the shipped code; a setting's name is its
-#: difference from the defaults of its time). Runs made before the GMM's structure
-#: was chosen by held-out likelihood are kept, not scored, in ``before_gmm_selection/``
-SWEEP = os.path.join(OUT, "validation")
+#: the weight sweep: every setting run before the start and the grey pass kept the
+#: lobes at the image's colour (the chromaticity start from the image was in); the
+#: weights were chosen there, and ``validation/defaults`` is the shipped code
+SWEEP = os.path.join(OUT, "validation_sweep")
 
 
 def setting_scores(folder) -> dict:

@@ -1,5 +1,6 @@
 """The experiment runner (benchmarks/experiments.py), one case at a time
 (mi_dsbrdf.evaluation.experiment), the Adam baseline and the report, on tiny cases."""
+import glob
 import json
 import os
 import sys
@@ -167,5 +168,10 @@ def test_config_defaults_are_the_validation_choice():
         choice = json.load(f)
     cfg = Config()
     assert {k: getattr(cfg, k) for k in choice["best_config"]} == choice["best_config"]
+    # the chosen setting's cases ran with the weights Config ships
+    for f in glob.glob(os.path.join(natural_light.SWEEP, choice["best"], "*.json")):
+        with open(f) as fh:
+            weights = json.load(fh)["case"].get("weights", {})
+        assert {k: getattr(cfg, k) for k in weights} == weights, f
     for scores in (choice["settings"][choice["best"]], choice["shipped"]):   # the sweep's pick, the shipped code
         assert all(scores[k]["median_ratio"] < 1 for k in choice["measures"])   # both beat doing nothing

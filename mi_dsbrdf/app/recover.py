@@ -83,7 +83,7 @@ def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=
             light, lit, L = None, ts, rec.illumination.reshape(-1, 3)
         else:
             point = (centre(obj), point_light_distance(scene, obj)) if needs.light == "point" else None
-            rec = recover_light(ts, obs, keep, model, cfg, progress=report, point=point)
+            rec = recover_light(ts, obs, keep, model, cfg, progress=report, point=point, colour=needs.colour_pass)
             light = {"type": needs.light, "direction": [float(v) for v in rec.light["direction"]],
                      "intensity": float(rec.light["intensity"])}
             if point is not None:

@@ -95,7 +95,7 @@ def highlight_lights(post) -> list:
 
 @single_blas_thread
 def recover_light(texels: TexelSum, observed, mask, model, config: Config = None, progress=None,
-                  known_light=None, point=None) -> Recovery:
+                  known_light=None, point=None, colour=True) -> Recovery:
     """MAP estimate of the material and a directional or point light.
 
     Parameters
@@ -108,6 +108,10 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     known_light : (direction (3,), intensity): skip the light search and block
     point : (centre (3,), distance) of a point light: it sits at ``distance``
         from ``centre`` in the recovered direction; None: a directional light
+    colour : fit the lobes' chromaticities; False for a grey image, whose lobes
+        keep its colour (grey): free, a lobe the image barely shows took any
+        colour (a grey sphere with a clipped highlight came back with a lobe of
+        (1.00, 0.00, 0.00))
     """
     cfg = config or Config()
     post = Posterior(texels, observed, mask, model, cfg, point=point)
@@ -132,7 +136,8 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         for th, ph, li in cands:
             post.aim(th, ph)
             step = reflectance_block(post, psi, logits, np.full((1, 3), np.exp(li)),
-                                     max(int(cfg.block_iters * SEARCH_FRACTION), 5), fit_scale=True)
+                                     max(int(cfg.block_iters * SEARCH_FRACTION), 5), fit_scale=True,
+                                     fit_chroma=colour)
             li = float(np.log(step.L[0, 0]))
             th, ph, li = light_block(post, post.material(step.psi, step.logits), th, ph, li,
                                      maxfev=SEARCH_POWELL_EVALS)                     # coarse: refined later
@@ -155,14 +160,15 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         post.aim(theta, phi)
         if rnd == 0:
             # the reflectance block from every start (psi found so far, the mean, GMM means)
-            steps = [reflectance_block(post, p0, logits, L, cfg.block_iters, fit_scale=known_light is None)
-                     for p0 in [psi] + reflectance_starts(model)]
+            steps = [reflectance_block(post, p0, logits, L, cfg.block_iters, fit_scale=known_light is None,
+                                       fit_chroma=colour) for p0 in [psi] + reflectance_starts(model)]
             step = min(steps, key=lambda s: post.reflectance_terms(s.psi, s.logits, s.L)[0])
         elif known_light is None:
-            step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True, direction=(theta, phi))
+            step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True, direction=(theta, phi),
+                                     fit_chroma=colour)
             theta, phi = step.direction
         else:
-            step = reflectance_block(post, psi, logits, L, cfg.block_iters)
+            step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_chroma=colour)
         psi, logits, L = step.psi, step.logits, step.L
         log_i = float(np.log(L[0, 0]))
         total, lik = post.reflectance_terms(psi, logits, L)

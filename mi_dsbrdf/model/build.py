@@ -4,7 +4,7 @@ behind ``mi-dsbrdf build-model``.
     measured BRDFs ──fit_full──▶ 3-lobe B-spline DSBRDF per material (Eq. 5)
                    ──fpca─────▶ mean b_mu + bases b_i of the log curves (Eq. 2-3)
                    ──fit_basis─▶ psi (k) + chromaticity per material (library)
-                   ──priors───▶ GMM on psi (Eq. 6), hue kappa_h (Eq. 7-12)
+                   ──priors───▶ GMM on psi (Eq. 6, BIC), hue kappa_h (Eq. 7-12)
                    ──▶ model.npz
 
 The full fits of a material do not depend on the other materials, so they are
@@ -38,14 +38,10 @@ from mi_dsbrdf.model import samples
 from mi_dsbrdf.model.fitting import OBJECTIVE, fit_basis, fit_full
 from mi_dsbrdf.model.fpca import fpca
 from mi_dsbrdf.model.model_file import load_model
-from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration
+from mi_dsbrdf.model.priors import fit_hue_concentration, select_gmm
 
 DEFAULT_K = 10
 SEED = 0
-#: the GMM's structure: the one that best predicts held-out materials (lowest mean
-#: leave-one-out -log p of the library's psi; ``benchmarks/gmm_selection.py`` ->
-#: ``benchmarks/results/gmm_selection.json``, which a test holds this to)
-GMM = {"covariance_type": "full", "n_components": 2, "reg": 0.01}
 
 
 # --- sources -----------------------------------------------------------------------
@@ -160,7 +156,7 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         err = np.array([r[3] for r in rows])                   # (M, 2): paper, cosine
     else:
         psi, chroma, err = pca.scores[:, :k], fits["chroma"][keep], np.full((len(keep), 2), np.nan)
-    gmm, _ = fit_gmm(psi, GMM["n_components"], GMM["covariance_type"], seed=SEED, reg=GMM["reg"])
+    sel = select_gmm(psi, seed=SEED)
     kappa_h, n_pairs = fit_hue_concentration(chroma)
     return {
         "knots": np.array(basis.knots), "mean": basis.mean, "bases": basis.bases,
@@ -170,8 +166,9 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         "fit_names": np.array(names), "fit_controls": fits["controls"], "fit_chroma": fits["chroma"],
         "fit_error": fits["error"], "fit_error_cosine": fits["error_cosine"],
         "fit_flags": np.array(["; ".join(f) for f in fits["flags"]]),
-        "gmm_weights": gmm.weights, "gmm_means": gmm.means, "gmm_covariances": gmm.covariances,
-        "gmm_covariance_type": np.array(GMM["covariance_type"]), "gmm_reg": np.array(GMM["reg"]),
+        "gmm_weights": sel.gmm.weights, "gmm_means": sel.gmm.means, "gmm_covariances": sel.gmm.covariances,
+        "gmm_covariance_type": np.array(sel.covariance_type),
+        "gmm_bic": np.array([(1.0 if ct == "full" else 0.0, c, ll, bic) for ct, c, ll, bic in sel.table]),
         "hue_kappa": np.array(kappa_h), "hue_pairs": np.array(n_pairs),
         "excluded": np.array(exclude, dtype=str),
     }
