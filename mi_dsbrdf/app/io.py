@@ -16,10 +16,6 @@ import numpy as np
 from mi_dsbrdf.errors import InputError
 
 
-#: integer pixel formats: an 8- or 16-bit image holds display values, not radiance
-LDR_FORMATS = (mi.Struct.Type.UInt8, mi.Struct.Type.UInt16)
-
-
 def _bitmap(path, what):
     path = os.fspath(path)
     if not os.path.exists(path):
@@ -33,32 +29,45 @@ def _bitmap(path, what):
 
 
 def _rgb(a) -> np.ndarray:
-    a = np.asarray(a, dtype=np.float64)
+    """(H, W, 3) float64 copy of (H, W) or (H, W, C) pixels: grey (with or without
+    alpha) repeated, RGB(A) cut to RGB."""
+    a = np.array(a, dtype=np.float64)
     if a.ndim == 2:
         a = a[..., None]
-    if a.shape[2] == 1:
-        a = np.repeat(a, 3, axis=2)
+    if a.shape[2] <= 2:
+        a = np.repeat(a[..., :1], 3, axis=2)
     return a[..., :3]
 
 
-def read_image(path, srgb=False, what="image") -> np.ndarray:
-    """(H, W, 3) float64 linear radiance from an EXR/HDR file.
+def srgb_to_linear(v) -> np.ndarray:
+    """The sRGB transfer function inverted (IEC 61966-2-1), on values in [0, 1]."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
-    An 8- or 16-bit file (PNG, JPEG) holds display values: with ``srgb`` it is
-    linearised by the sRGB curve to [0, 1], without it an InputError names the
-    fix (a raw 8-bit value taken as radiance is wrong by the curve and a factor
-    of 255). InputError if the file is missing or unreadable.
+
+def as_radiance(pixels, srgb=False, what="image") -> np.ndarray:
+    """(H, W, 3) float64 linear radiance from (H, W[, C]) pixels, a copy.
+
+    8- or 16-bit integer pixels (a PNG or JPEG, or a uint8/uint16 array) hold
+    display values: with ``srgb`` they are linearised by the sRGB curve to [0, 1],
+    without it an InputError names the fix (a raw 8-bit value taken as radiance
+    is wrong by the curve and a factor of 255).
     """
-    bmp = _bitmap(path, what)
-    if bmp.component_format() in LDR_FORMATS:
+    a = np.asarray(pixels)
+    if a.dtype in (np.uint8, np.uint16):
         if not srgb:
-            raise InputError("%s %s is %d-bit (display values, not radiance): give a linear HDR image (EXR/HDR), "
-                             "or pass --srgb (srgb=True) to linearise it from sRGB" % (
-                                 what, os.fspath(path), 8 if bmp.component_format() == mi.Struct.Type.UInt8 else 16))
-        fmt = mi.Bitmap.PixelFormat.Y if bmp.pixel_format() in (mi.Bitmap.PixelFormat.Y, mi.Bitmap.PixelFormat.YA) \
-            else mi.Bitmap.PixelFormat.RGB
-        bmp = bmp.convert(fmt, mi.Struct.Type.Float32, srgb_gamma=False)
-    return _rgb(bmp)
+            raise InputError("%s holds %d-bit display values, not radiance: give a linear HDR image (EXR/HDR), "
+                             "or pass --srgb (srgb=True) to linearise it from sRGB" % (what, 8 * a.itemsize))
+        a = srgb_to_linear(a / float(np.iinfo(a.dtype).max))
+    if not np.issubdtype(a.dtype, np.number) or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] > 4):
+        raise InputError("%s must be an (H, W, 3) array of radiance, got %s of shape %s" % (what, a.dtype, a.shape))
+    return _rgb(a)
+
+
+def read_image(path, srgb=False, what="image") -> np.ndarray:
+    """(H, W, 3) float64 linear radiance from an EXR/HDR file (:func:`as_radiance`:
+    an 8- or 16-bit file only with ``srgb``); InputError if missing or unreadable."""
+    return as_radiance(np.array(_bitmap(path, what)), srgb, "%s %s" % (what, os.fspath(path)))
 
 
 def read_mask(path, shape) -> np.ndarray:
@@ -79,10 +88,7 @@ def as_mask(a, shape, what="mask") -> np.ndarray:
         raise InputError("%s must be an (H, W) array, got shape %s" % (what, a.shape))
     if a.dtype != bool:
         a = a.astype(np.float64)
-        bad = ~np.isfinite(a)
-        if bad.any():
-            raise InputError("%s has %d NaN/Inf values (first at pixel %s)" % (
-                what, int(bad.sum()), tuple(int(v) for v in np.argwhere(bad)[0][::-1])))
+        check_finite(a, what)
         a = a > 0.5 * a.max() if a.max() > 0 else np.zeros(a.shape, bool)
     if a.shape != tuple(shape):
         raise InputError("%s is %dx%d but the image is %dx%d" % (what, a.shape[1], a.shape[0], shape[1], shape[0]))
@@ -91,14 +97,24 @@ def as_mask(a, shape, what="mask") -> np.ndarray:
     return a
 
 
+def check_finite(a, what, unit="pixel") -> None:
+    """InputError naming the first NaN/Inf of ``a`` (H, W[, C]) as (x, y)."""
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise InputError("%s has %d NaN/Inf values (first at %s %s)" % (
+            what, int(bad.sum()), unit, tuple(int(v) for v in np.argwhere(bad)[0][:2][::-1])))
+
+
+def check_radiance(a, what, unit="pixel") -> None:
+    """InputError for non-finite or negative radiance."""
+    check_finite(a, what, unit)
+    if (a < 0).any():
+        raise InputError("%s has %d negative values: radiance is >= 0" % (what, int((a < 0).sum())))
+
+
 def check_image(image, path="image") -> None:
     """InputError for non-finite, negative or all-black images."""
-    bad = ~np.isfinite(image)
-    if bad.any():
-        raise InputError("%s has %d NaN/Inf values (first at pixel %s)" % (
-            path, int(bad.sum()), tuple(int(v) for v in np.argwhere(bad)[0][:2][::-1])))
-    if (image < 0).any():
-        raise InputError("%s has %d negative values: an HDR image of radiance is >= 0" % (path, int((image < 0).sum())))
+    check_radiance(image, path)
     if not (image > 0).any():
         raise InputError("%s is black everywhere: nothing to recover" % path)
 

@@ -24,7 +24,7 @@ import math
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.recover import load_inputs
+from mi_dsbrdf.app.recover import interior, load_inputs
 from mi_dsbrdf.errors import InputError
 
 #: the fitted circle must cover the outline this well (intersection over union)
@@ -64,11 +64,7 @@ def fit_circle(mask, given=True) -> tuple:
     ys, xs = np.nonzero(m)
     if xs.size < MIN_OUTLINE:
         raise InputError("the sphere covers %d pixels: too few to fit its outline" % xs.size)
-    inner = m.copy()
-    for axis in (0, 1):
-        for shift in (1, -1):
-            inner &= np.roll(m, shift, axis=axis)
-    edge = m & ~inner
+    edge = m & ~interior(m)
     edge[0], edge[-1], edge[:, 0], edge[:, -1] = False, False, False, False
     ey, ex = np.nonzero(edge)
     if ex.size < MIN_OUTLINE:

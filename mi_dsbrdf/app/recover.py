@@ -13,7 +13,7 @@ import mitsuba as mi
 import numpy as np
 from tqdm import tqdm
 
-from mi_dsbrdf.app.io import as_mask, check_image, check_out, read_image, read_mask, saturated
+from mi_dsbrdf.app.io import as_mask, as_radiance, check_image, check_out, read_image, read_mask, saturated
 from mi_dsbrdf.app.result import RESULT_FILES, Result
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
@@ -159,24 +159,7 @@ def _image(image, srgb) -> np.ndarray:
     caller's array is never changed)."""
     if isinstance(image, (str, os.PathLike)):
         return read_image(image, srgb=srgb)
-    a = np.asarray(image)
-    if a.dtype == np.uint8 or a.dtype == np.uint16:
-        if not srgb:
-            raise InputError("image is a %s array (display values, not radiance): give linear float radiance, "
-                             "or pass srgb=True to linearise it from sRGB" % a.dtype)
-        a = srgb_to_linear(a / float(np.iinfo(a.dtype).max))
-    if not np.issubdtype(a.dtype, np.number) or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (1, 3, 4)):
-        raise InputError("image must be an (H, W, 3) array of radiance, got %s of shape %s" % (a.dtype, a.shape))
-    a = np.array(a, dtype=np.float64)
-    if a.ndim == 2:
-        a = a[..., None]
-    return np.repeat(a, 3, axis=2) if a.shape[2] == 1 else a[..., :3].copy()
-
-
-def srgb_to_linear(v) -> np.ndarray:
-    """The sRGB transfer function inverted (IEC 61966-2-1), on values in [0, 1]."""
-    v = np.asarray(v, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+    return as_radiance(image, srgb, "image (a %s array)" % np.asarray(image).dtype)
 
 
 def _progress(progress):

@@ -7,7 +7,7 @@ import time
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.io import read_image, save_preview, staged_file, write_exr
+from mi_dsbrdf.app.io import check_radiance, read_image, save_preview, staged_file, write_exr
 from mi_dsbrdf.app.scenes import camera, shape_dict
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.errors import InputError
@@ -122,12 +122,7 @@ def material_dict(material) -> dict:
 def check_envmap(path) -> None:
     """InputError unless ``path`` is a lat-long map of finite, non-negative radiance."""
     L = read_image(path, what="envmap")
-    bad = ~np.isfinite(L)
-    if bad.any():
-        raise InputError("envmap %s has %d NaN/Inf values (first at texel %s)" % (
-            os.fspath(path), int(bad.sum()), tuple(int(v) for v in np.argwhere(bad)[0][:2][::-1])))
-    if (L < 0).any():
-        raise InputError("envmap %s has %d negative values: radiance is >= 0" % (os.fspath(path), int((L < 0).sum())))
+    check_radiance(L, "envmap %s" % os.fspath(path), unit="texel")
     if L.shape[1] < 2 * L.shape[0] - 2 or L.shape[1] > 2 * L.shape[0] + 2:
         raise InputError("envmap %s is %dx%d: a lat-long map is twice as wide as high" % (
             os.fspath(path), L.shape[1], L.shape[0]))
