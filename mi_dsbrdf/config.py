@@ -48,6 +48,12 @@ class Config:
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
         step: it fits 16 variables, so an evenly spread subset of the pixels does
         (the Jacobian's cost is proportional to pixels x texels)
+    map_pairs : pixel-texel pairs the posterior of an illumination map works on:
+        an image with more usable pixels than ``map_pairs / texels`` is fitted on
+        an evenly spread subset of that many, its likelihood scaled up to stand
+        for all of them. The transport is stored as (3, P, T) float32 (100 MB at
+        the default) and every L-BFGS step reads it twice, so time and memory
+        follow P x T; 4096 pixels at 32x64 texels (a 64-pixel sphere has 3000)
     """
     map_size: tuple = (32, 64)
     max_rounds: int = 3
@@ -61,6 +67,7 @@ class Config:
     w_gradient: float = 30000.0
     map_levels: int = 2
     reflectance_pairs: int = 500_000
+    map_pairs: int = 1 << 23
 
     def __post_init__(self):
         try:
@@ -71,7 +78,7 @@ class Config:
             raise ConfigError("map_size %dx%d is too small (at least 2x4)" % (h, w))
         object.__setattr__(self, "map_size", (h, w))
         for name, low in (("max_rounds", 1), ("block_iters", 1), ("illumination_iters", 1), ("map_levels", 1),
-                          ("reflectance_pairs", 64)):
+                          ("reflectance_pairs", 64), ("map_pairs", 64)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))

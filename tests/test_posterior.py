@@ -156,3 +156,35 @@ def test_the_chromaticity_start_is_the_image_colour():
     sharper = (1 - START_GREY_MIX) * np.array([0.6, 0.3, 0.1]) + START_GREY_MIX / 3
     np.testing.assert_allclose(c[1:], np.tile(sharper, (2, 1)), atol=1e-9)
 
+
+
+def test_a_large_image_is_fitted_on_an_evenly_spread_subset_standing_for_all_pixels():
+    """Config.map_pairs: above it the posterior keeps map_pairs / texels pixels, its
+    likelihood (and gradient) scaled to stand for all usable pixels, the priors
+    weighted by all of them; below it nothing changes."""
+    from mi_dsbrdf.config import Config
+    from mi_dsbrdf.inference.objective import Posterior
+    from mi_dsbrdf.model import model_file as model_data
+    from mi_dsbrdf.inference.forward import TexelSum
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    from mi_dsbrdf.app.scenes import sphere_scene
+    s = sphere_scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, 24)
+    ts = TexelSum(s, s.shapes()[0], (4, 8))
+    observed = np.zeros((24 * 24, 3))
+    observed[ts.pixels] = ts.render(procedural_sky(4, 8))
+    observed = observed.reshape(24, 24, 3)
+    model = model_data.shipped_model()
+    n = int(ts.mask.sum())
+    full = Posterior(ts, observed, ts.mask, model, Config(map_size=(4, 8)))
+    sub = Posterior(ts, observed, ts.mask, model, Config(map_size=(4, 8), map_pairs=32 * 4 * 8 * 4))
+    assert full.view.n_pixels == n and full.weight == 1.0
+    assert sub.view.n_pixels == 128 < n and sub.weight == pytest.approx(n / 128)
+    assert sub.w == full.w                                        # the priors: all usable pixels
+    assert sub.refl.weight == pytest.approx(n / sub.refl.observed.shape[0])
+    psi, logits = np.zeros(model.basis.n_bases), np.zeros((model.basis.n_lobes, 2))
+    x = np.log(procedural_sky(4, 8).astype(np.float64)) + np.random.default_rng(2).normal(0, 0.5, (4, 8, 3))
+    seen = ~full.view.unseen.reshape(4, 8)
+    a = full.map_likelihood(x, full.transport(psi, logits), seen)
+    b = sub.map_likelihood(x, sub.transport(psi, logits), seen)
+    assert b[0] == pytest.approx(a[0], rel=0.1)                   # an estimate of the whole sum
+    np.testing.assert_allclose(b[1].sum(axis=(0, 1)), a[1].sum(axis=(0, 1)), rtol=0.15)

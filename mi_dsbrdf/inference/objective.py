@@ -49,6 +49,13 @@ class PixelView:
     weight: float
 
 
+def spread(rows, n) -> np.ndarray:
+    """At most ``n`` of the indices ``rows``, evenly spread over them (all if fewer)."""
+    if rows.size <= n:
+        return rows
+    return rows[np.linspace(0, rows.size - 1, n).round().astype(np.int64)]
+
+
 def direction_from_angles(theta, phi) -> np.ndarray:
     """World direction (y up, the lat-long convention of :mod:`mi_dsbrdf.inference.latlong`)."""
     st = np.sin(theta)
@@ -79,22 +86,26 @@ class Posterior:
         self.model, self.cfg, self.point = model, config, point
         obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
-        self.observed, self.keep = obs, keep
         self.offset = LOG_OFFSET * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
         self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
         self.k, self.R = model.basis.n_bases, model.basis.n_lobes
+        n_usable = int(keep.sum())
+        # the posterior's pixels (Config.map_pairs): all usable ones, or an evenly
+        # spread subset whose likelihood is scaled up (``weight``) to stand for all
+        rows = spread(np.nonzero(keep)[0], max(config.map_pairs // max(texels.n_texels, 1), MIN_REFLECTANCE_PIXELS))
+        if rows.size < n_usable:
+            texels, obs, keep = texels.subset(rows), obs[rows], np.ones(rows.size, bool)
+        self.observed, self.keep, self.weight = obs, keep, n_usable / max(int(keep.sum()), 1)
         self.view = LobeSum(texels)
-        # the reflectance block's pixels: an evenly spread subset, its likelihood
-        # scaled up to stand for all usable pixels
-        usable = np.nonzero(keep)[0]
+        # the reflectance block's pixels: an evenly spread subset of those
         n_sub = int(np.clip(config.reflectance_pairs // max(texels.n_texels, 1), MIN_REFLECTANCE_PIXELS,
                             MAX_REFLECTANCE_PIXELS))
-        if usable.size > n_sub:
-            rows = usable[np.linspace(0, usable.size - 1, n_sub).round().astype(np.int64)]
+        rows = spread(np.nonzero(keep)[0], n_sub)
+        if rows.size < int(keep.sum()):
             self.refl = PixelView(self.view.subset(rows), obs[rows], np.ones(rows.size, bool),
-                                  usable.size / rows.size)
+                                  n_usable / rows.size)
         else:
-            self.refl = PixelView(self.view, obs, keep, 1.0)
+            self.refl = PixelView(self.view, obs, keep, self.weight)
         # the range of the library's kappa/gamma control values: a recovered curve
         # stays within CURVE_MARGIN of it (one image sees few theta_d; without this
         # box the unobserved, grazing end of a curve can run off to kappa = e^60)
@@ -103,7 +114,7 @@ class Posterior:
         c0 = model.basis.control_values(np.zeros(self.k)).reshape(-1)      # control values are linear in psi
         self.curve_map = (c0, np.stack([model.basis.control_values(e).reshape(-1) - c0 for e in np.eye(self.k)],
                                        axis=1))
-        self.w = config.prior_weights(int(keep.sum()))
+        self.w = config.prior_weights(n_usable)
         self.entropy = EntropyPrior(self.w["entropy"])
         self.gradient = GradientPrior(self.w["gradient"])
 
@@ -169,11 +180,9 @@ class Posterior:
         v = self.refl
         return self.likelihood(v.lobes.render(material, L), v.observed, v.keep) * v.weight
 
-    def likelihood(self, image, observed=None, keep=None) -> float:
-        """Eq. 19 of the pixel radiance ``image`` (P, 3) against ``observed``
-        (default: all this view's pixels)."""
-        observed = self.observed if observed is None else observed
-        keep = self.keep if keep is None else keep
+    def likelihood(self, image, observed, keep) -> float:
+        """Eq. 19 of the pixel radiance ``image`` (P, 3) against ``observed`` (P, 3)
+        at the pixels ``keep`` (P,), unweighted."""
         return log_likelihood_terms(image[:, None, :], observed[:, None, :], keep[:, None], self.offset,
                                     self.scale)[0]
 
@@ -185,8 +194,8 @@ class Posterior:
         lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
                                           self.offset, self.scale)
         if not grad:
-            return lik, None
-        return lik, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * L
+            return lik * self.weight, None
+        return lik * self.weight, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * (L * self.weight)
 
     def illumination_terms(self, log_map, T, seen, bins) -> tuple:
         """(value, d/d log_map, likelihood) of likelihood + entropy + gradient priors at fixed reflectance."""
