@@ -44,6 +44,25 @@ def test_leave_one_out_really_excludes_the_material(tmp_path):
         build_model.build_from_fits(fits, k=14, exclude=["mat-00"], refit=False, progress=False)
 
 
+def test_the_gmm_structure_is_an_option_of_the_build():
+    """build_from_fits(gmm=...): BIC's choice or a given covariance type, number of
+    components and regularisation; the structure is stored; a bad one is refused."""
+    fits = synthetic_fits(24)
+    two = build_model.build_from_fits(fits, k=4, refit=False, progress=False, gmm="diag:2:0.01")
+    assert two["gmm_weights"].shape == (2,) and str(two["gmm_covariance_type"]) == "diag"
+    assert str(two["gmm_structure"]) == "diag:2:0.01" and float(two["gmm_reg"]) == 0.01
+    bic = build_model.build_from_fits(fits, k=4, refit=False, progress=False, gmm="bic")
+    assert str(bic["gmm_structure"]) == "bic" and bic["gmm_bic"].shape[1] == 4
+    # a stronger regularisation widens every component
+    wide = build_model.build_from_fits(fits, k=4, refit=False, progress=False, gmm="diag:2:1.0")
+    def smallest_variance(a):
+        return np.diagonal(a["gmm_covariances"], axis1=1, axis2=2).min(axis=1)
+    assert np.all(smallest_variance(wide) > smallest_variance(two))
+    for bad in ("full", "full:0:0.1", "mixed:2:0.1", "full:2:x"):
+        with pytest.raises(ModelError, match="GMM structure"):
+            build_model.gmm_structure(bad)
+
+
 def _arrays(tmp_path, **override):
     a = build_model.build_from_fits(synthetic_fits(), k=4, refit=False, progress=False)
     a["library_psi"] = np.nan_to_num(a["library_psi"])

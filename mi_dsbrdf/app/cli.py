@@ -16,7 +16,7 @@ from mi_dsbrdf.app.render import relight, render_to_files
 from mi_dsbrdf.app.scenes import scene_path
 from mi_dsbrdf.config import PRESETS
 from mi_dsbrdf.errors import InputError, MiDsbrdfError
-from mi_dsbrdf.model.build import build_model
+from mi_dsbrdf.model.build import GMM, build_model
 from mi_dsbrdf.model.model_file import SHIPPED
 
 
@@ -61,7 +61,7 @@ def cmd_build_model(args):
     if os.path.exists(out) and not args.force:
         raise InputError("%s exists; pass --force to replace it" % out)
     a = build_model(args.merl, out, k=args.k, exclude=args.exclude, workers=args.workers,
-                    fits_from=args.fits_from)
+                    fits_from=args.fits_from, gmm=args.gmm)
     info = json.loads(str(a["build_info"]))
     print("model with %d bases (%.1f%% of the curve variance), %d library materials, GMM of %d %s components, "
           "hue kappa_h %.3g: %s (%.0f s)" % (
@@ -148,6 +148,8 @@ def main(argv=None):
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--fits-from", default=None, metavar="MODEL",
                    help="reuse the full per-material fits stored in this model file")
+    p.add_argument("--gmm", default=GMM, metavar="STRUCTURE",
+                   help="the GMM prior's structure: 'bic' or 'full|diag:components:reg' (default %s)" % GMM)
     p.add_argument("--force", action="store_true", help="replace an existing model file")
     p.set_defaults(func=cmd_build_model)
 

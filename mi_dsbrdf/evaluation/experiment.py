@@ -8,7 +8,8 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      weights, with priors), "shape": "sphere" | "torus", "res": pixels, "map": [H, W],
      "rounds": int, "iters": int, "method": "dsbrdf" | "dsbrdf-adam" | "principled-adam" | "mean-constant"
      (probes: the model's mean material under a constant map, the do-nothing baseline),
-     "spp": samples per pixel (Adam methods)}
+     "spp": samples per pixel (Adam methods), "gmm": the leave-one-out model's GMM
+     structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's)}
 
 :func:`run_case` renders the truth with the measured material (the ``merl``
 plugin evaluated by the texel-sum forward model; a probe at twice the
@@ -66,7 +67,7 @@ from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.model import model_file as model_data
-from mi_dsbrdf.model.build import build_from_fits, save_model, stored_fits
+from mi_dsbrdf.model.build import GMM, build_from_fits, gmm_structure, save_model, stored_fits
 from mi_dsbrdf.model.samples import samples_from_table
 
 #: probes used for relighting (the first two that differ from the case's probe)
@@ -113,15 +114,19 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
     return img.reshape(h, w, 3)
 
 
-def loo_model(name, cache):
+def loo_model(name, cache, gmm=None):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
-    library from the other 99 fits; cached as ``cache/loo-<name>-<h>.npz``, h
-    the first 12 hex digits of the shipped model file's SHA-256, so that a rebuilt
-    model never reuses a leave-one-out model of the one before)."""
-    path = os.path.join(cache, "loo-%s-%s.npz" % (name, shipped_model_hash()))
+    library from the other 99 fits; the GMM of structure ``gmm``, default the
+    build's, :func:`~mi_dsbrdf.model.build.gmm_structure`), cached as
+    ``cache/loo-<name>-<h>-<gmm>.npz``, h the first 12 hex digits of the shipped
+    model file's SHA-256, so that a rebuilt model never reuses a leave-one-out
+    model of the one before)."""
+    gmm = GMM if gmm is None else gmm
+    tag = "-".join(map(str, gmm_structure(gmm)))
+    path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, shipped_model_hash(), tag))
     if not os.path.exists(path):
         fits = stored_fits(model_data.shipped_model().arrays)
-        save_model(path, build_from_fits(fits, exclude=[name], refit=False, progress=False))    # atomic
+        save_model(path, build_from_fits(fits, exclude=[name], refit=False, progress=False, gmm=gmm))    # atomic
     return model_data.load_model(path)
 
 
@@ -180,7 +185,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
     name = case["material"]
     res, (H, W) = case["res"], case.get("map", (16, 32))
-    model = loo_model(name, cache)
+    model = loo_model(name, cache, case.get("gmm"))
     samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, name))
     merl = {"type": "merl", "nbrdf": nbrdf, "material": name}
     shape = case.get("shape", "sphere")

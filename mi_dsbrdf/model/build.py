@@ -4,7 +4,7 @@ behind ``mi-dsbrdf build-model``.
     measured BRDFs ──fit_full──▶ 3-lobe B-spline DSBRDF per material (Eq. 5)
                    ──fpca─────▶ mean b_mu + bases b_i of the log curves (Eq. 2-3)
                    ──fit_basis─▶ psi (k) + chromaticity per material (library)
-                   ──priors───▶ GMM on psi (Eq. 6, BIC), hue kappa_h (Eq. 7-12)
+                   ──priors───▶ GMM on psi (Eq. 6, structure GMM), hue kappa_h (Eq. 7-12)
                    ──▶ model.npz
 
 The full fits of a material do not depend on the other materials, so they are
@@ -38,10 +38,47 @@ from mi_dsbrdf.model import samples
 from mi_dsbrdf.model.fitting import OBJECTIVE, fit_basis, fit_full
 from mi_dsbrdf.model.fpca import fpca
 from mi_dsbrdf.model.model_file import load_model
-from mi_dsbrdf.model.priors import fit_hue_concentration, select_gmm
+from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration, select_gmm
 
 DEFAULT_K = 10
 SEED = 0
+#: the GMM prior's structure (:func:`gmm_structure`): "bic", or
+#: "covariance:components:reg"
+GMM = "bic"
+
+
+def gmm_structure(text) -> tuple:
+    """``"bic"`` -> ("bic",): 1-5 components of full and diagonal covariances, the
+    lowest BIC; ``"full:2:0.01"`` -> ("full", 2, 0.01): that covariance type and
+    number of components, ``reg`` times the mean variance added to each
+    covariance (:func:`~mi_dsbrdf.model.priors.fit_gmm`). ModelError otherwise."""
+    text = str(text).strip().lower()
+    if text == "bic":
+        return ("bic",)
+    parts = text.split(":")
+    try:
+        ct, c, reg = parts[0], int(parts[1]), float(parts[2])
+        ok = len(parts) == 3 and ct in ("full", "diag") and 1 <= c <= 10 and 0 <= reg < 10
+    except (IndexError, ValueError):
+        ok = False
+    if not ok:
+        raise ModelError("GMM structure %r: give 'bic' or 'full|diag:components:reg', e.g. 'full:2:0.01'" % text)
+    return ct, c, reg
+
+
+def fit_gmm_prior(psi, structure=GMM) -> dict:
+    """The GMM arrays of a model file (Eq. 6) for the library's ``psi`` (M, k)."""
+    s = gmm_structure(structure)
+    if s[0] == "bic":
+        sel = select_gmm(psi, seed=SEED)
+        gmm, ct = sel.gmm, sel.covariance_type
+        extra = {"gmm_bic": np.array([(1.0 if t == "full" else 0.0, c, ll, bic) for t, c, ll, bic in sel.table])}
+    else:
+        ct, c, reg = s
+        gmm, _ = fit_gmm(psi, c, ct, seed=SEED, reg=reg)
+        extra = {"gmm_reg": np.array(reg)}
+    return {"gmm_weights": gmm.weights, "gmm_means": gmm.means, "gmm_covariances": gmm.covariances,
+            "gmm_covariance_type": np.array(ct), "gmm_structure": np.array(":".join(map(str, s))), **extra}
 
 
 # --- sources -----------------------------------------------------------------------
@@ -126,7 +163,7 @@ def fit_all(source, names=None, workers=2, progress=True) -> dict:
 
 
 def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2, progress=True,
-                    refit=True) -> dict:
+                    refit=True, gmm=GMM) -> dict:
     """Bases, library and priors from full fits, without the ``exclude``d materials.
 
     With ``refit`` (and a ``source``), every kept material is refitted in the
@@ -156,7 +193,6 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         err = np.array([r[3] for r in rows])                   # (M, 2): paper, cosine
     else:
         psi, chroma, err = pca.scores[:, :k], fits["chroma"][keep], np.full((len(keep), 2), np.nan)
-    sel = select_gmm(psi, seed=SEED)
     kappa_h, n_pairs = fit_hue_concentration(chroma)
     return {
         "knots": np.array(basis.knots), "mean": basis.mean, "bases": basis.bases,
@@ -166,17 +202,18 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         "fit_names": np.array(names), "fit_controls": fits["controls"], "fit_chroma": fits["chroma"],
         "fit_error": fits["error"], "fit_error_cosine": fits["error_cosine"],
         "fit_flags": np.array(["; ".join(f) for f in fits["flags"]]),
-        "gmm_weights": sel.gmm.weights, "gmm_means": sel.gmm.means, "gmm_covariances": sel.gmm.covariances,
-        "gmm_covariance_type": np.array(sel.covariance_type),
-        "gmm_bic": np.array([(1.0 if ct == "full" else 0.0, c, ll, bic) for ct, c, ll, bic in sel.table]),
+        **fit_gmm_prior(psi, gmm),
         "hue_kappa": np.array(kappa_h), "hue_pairs": np.array(n_pairs),
         "excluded": np.array(exclude, dtype=str),
     }
 
 
-def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, fits_from=None) -> dict:
+def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, fits_from=None,
+                gmm=GMM) -> dict:
     """The whole build, written to ``out`` (a ``.npz``). ``fits_from``: a model
-    file whose stored full fits are reused instead of refitting them. Returns the arrays."""
+    file whose stored full fits are reused instead of refitting them; ``gmm``: the
+    GMM's structure (:func:`gmm_structure`). Returns the arrays."""
+    gmm_structure(gmm)                                        # a bad structure fails before the fits
     t0 = time.perf_counter()
     if fits_from is not None:
         a = load_model(fits_from).arrays
@@ -185,14 +222,15 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
         fits = stored_fits(a)
     else:
         fits = fit_all(source, workers=workers, progress=progress)
-    arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress)
+    arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress,
+                             gmm=gmm)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
-            "k": k, "excluded": list(exclude), "seed": SEED, "fit_objective": dataclasses.asdict(OBJECTIVE),
+            "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm), "fit_objective": dataclasses.asdict(OBJECTIVE),
             "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
             "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
                 os.path.basename(os.fspath(source)), os.path.basename(os.fspath(out)),
-                "".join(" --exclude %s" % n for n in exclude))}
+                "".join(" --exclude %s" % n for n in exclude) + ("" if gmm == GMM else " --gmm %s" % gmm))}
     arrays["build_info"] = np.array(json.dumps(info))
     save_model(out, arrays)
     return arrays
