@@ -47,7 +47,7 @@ import sys
 import numpy as np
 
 from experiments import DATA, make_case, run_on_cluster
-from mi_dsbrdf.model.build import gmm_structure
+from mi_dsbrdf.model.build import GMM, gmm_structure
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "benchmarks", "results", "natural_light")
@@ -203,6 +203,9 @@ def summary(folder) -> str:
 #: the measures a setting is chosen on (BRDF, illumination and what a user sees)
 CHOICE_MEASURES = ("brdf_eq20_paper", "illumination_error", "relight")
 CHOICE = os.path.join(OUT, "validation_choice.json")
+#: the GMM's structure and weight, chosen among the settings under ``validation/``
+#: (the shipped code is ``defaults``; the others ran with ``--gmm`` / ``--config``)
+GMM_CHOICE = os.path.join(OUT, "gmm_choice.json")
 #: the weight sweep: every setting run before the start and the grey pass kept the
 #: lobes at the image's colour (the chromaticity start from the image was in); the
 #: weights were chosen there, and ``validation/defaults`` is the shipped code
@@ -222,20 +225,43 @@ def setting_scores(folder) -> dict:
     return out
 
 
-def choose(root=SWEEP, n_cases=None) -> dict:
+def parse_setting(name) -> tuple:
+    """(GMM structure or None, Config overrides) of a :func:`setting_name`."""
+    parts = [] if name == "defaults" else name.split("-")
+    gmm = None
+    if parts[:1] == ["gmm"]:
+        n = 2 if parts[1] == "bic" else 4
+        gmm, parts = ":".join(parts[1:n]), parts[n:]
+    return gmm, parse_config(parts)
+
+
+def choose(root=SWEEP, n_cases=None, command="--choose") -> dict:
     """The validation setting with the lowest score (:func:`setting_scores`) among
-    the complete ones (every validation case run), and every setting's scores."""
-    n_cases = n_cases or len(VALIDATION_MATERIALS) * len(VALIDATION_PROBES)
+    the complete ones (``n_cases`` run; default: as many as the setting with the
+    most), and every setting's scores."""
     scores = {os.path.basename(d): setting_scores(d) for d in sorted(glob.glob(os.path.join(root, "*")))
               if os.path.isdir(d)}
+    n_cases = n_cases or max([v["cases"] for v in scores.values()] + [1])
     complete = {k: v for k, v in scores.items() if v["cases"] == n_cases}
     if not complete:
         raise SystemExit("no complete validation setting under %s" % root)
     best = min(complete, key=lambda k: complete[k]["score"])
-    return {"command": "python benchmarks/natural_light.py --choose", "measures": list(CHOICE_MEASURES),
+    gmm, config = parse_setting(best)
+    return {"command": "python benchmarks/natural_light.py " + command, "measures": list(CHOICE_MEASURES),
             "rule": "lowest mean over the measures of the median ratio to doing nothing",
-            "best": best, "best_config": parse_config(best.split("-")) if best != "defaults" else {},
+            "cases": n_cases, "best": best, "best_config": config,
+            "best_gmm": GMM if gmm is None else gmm,     # defaults: the build's structure
             "settings": scores}
+
+
+def choice_table(choice) -> str:
+    """The settings of a :func:`choose` result as a markdown table, best first."""
+    lines = ["| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
+             + " | score |", "|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 1)]
+    for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["score"]):
+        lines.append("| %s | %d | %.0f | %s | %.3f |" % (name, v["cases"], v["seconds_median"], " | ".join(
+            "%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"]))
+    return "\n".join(lines)
 
 
 DOCS = os.path.join(ROOT, "docs")
@@ -308,9 +334,19 @@ def main(argv=None):
     ap.add_argument("--choose", action="store_true",
                     help="score every validation setting run so far and write the choice to %s" %
                          os.path.relpath(CHOICE, ROOT))
+    ap.add_argument("--choose-gmm", action="store_true",
+                    help="score every setting under validation/ (GMM structures and weights) and write the "
+                         "choice to %s" % os.path.relpath(GMM_CHOICE, ROOT))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
+    if args.choose_gmm:
+        choice = choose(os.path.join(OUT, "validation"), command="--choose-gmm")
+        with open(GMM_CHOICE, "w") as f:
+            json.dump(choice, f, indent=1)
+        print(choice_table(choice))
+        print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(GMM_CHOICE, ROOT)))
+        return
     if args.choose:
         choice = choose()
         shipped = os.path.join(OUT, "validation", "defaults")
@@ -318,11 +354,7 @@ def main(argv=None):
             choice["shipped"] = dict(setting_scores(shipped), folder=os.path.relpath(shipped, ROOT))
         with open(CHOICE, "w") as f:
             json.dump(choice, f, indent=1)
-        print("| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
-              + " | score |\n|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 1))
-        for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["score"]):
-            print("| %s | %d | %.0f | %s | %.3f |" % (name, v["cases"], v["seconds_median"], " | ".join(
-                "%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"]))
+        print(choice_table(choice))
         if "shipped" in choice:
             v = choice["shipped"]
             print("| **shipped code** (%s) | %d | %.0f | %s | %.3f |" % (

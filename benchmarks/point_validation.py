@@ -3,15 +3,15 @@
 The prior weights are shared by every kind of light, and a point light sees a
 narrow band of theta_d: the reflectance prior carries more of the answer there.
 This runs the validation materials (``natural_light.VALIDATION_MATERIALS``)
-under a point light at two angles with each GMM weight in WEIGHTS and prints
-Eq. 20 (paper) beside the model's mean material (psi = 0).
+under a point light at two angles, with a GMM weight and the leave-one-out
+models' GMM structure (default: the shipped ones), and prints Eq. 20 (paper)
+beside the model's mean material (psi = 0).
 
-    .venv/bin/python benchmarks/point_validation.py     # 12 cases per weight, ~2 min on 2 cores
+    .venv/bin/python benchmarks/point_validation.py                       # 24 cases, ~3 min on 2 cores
+    .venv/bin/python benchmarks/point_validation.py --gmm full:2:0.01 --w-gmm 100
 
-Writes ``benchmarks/results/point_validation.json``. Shipped code: the BRDF
-beats the mean material in 5 of 12 cases (median ratio 1.06; nickel and
-violet-acrylic fail at both angles), with the light direction within 1.04 deg
-everywhere.
+Adds its setting to ``benchmarks/results/point_validation.json`` (``settings``,
+named like ``natural_light.setting_name``).
 """
 from __future__ import annotations
 
@@ -21,50 +21,57 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+import argparse
+
 from experiments import CACHE, DATA
-from natural_light import VALIDATION_MATERIALS
+from natural_light import VALIDATION_MATERIALS, setting_name
 
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "point_validation.json")
-WEIGHTS = (300.0,)
 ANGLES = (20, 60)
 
 
 def _run(args):
     import mi_dsbrdf  # noqa: F401
     from mi_dsbrdf.evaluation import experiment as ev
-    material, angle, w = args
+    material, angle, weights, gmm = args
     case = {"id": "point-validation", "kind": "point", "material": material, "angle": angle, "priors": True,
-            "res": 64, "map": [8, 16], "rounds": 3, "iters": 15, "weights": {"w_gmm": w}}
+            "res": 64, "map": [8, 16], "rounds": 3, "iters": 15, "weights": weights}
+    if gmm is not None:
+        case["gmm"] = gmm
     r = ev.run_case(case, DATA, CACHE, threads=1)
-    return {"material": material, "angle": angle, "w_gmm": w, "direction_error_deg": r["direction_error_deg"],
+    return {"material": material, "angle": angle, "direction_error_deg": r["direction_error_deg"],
             "brdf_eq20_paper": r["brdf_eq20_paper"], "brdf_eq20_cosine": r["brdf_eq20_cosine"],
             "mean_material_paper": r["baseline"]["brdf_eq20_paper"],
             "mean_material_cosine": r["baseline"]["brdf_eq20_cosine"], "seconds": r["seconds"]}
 
 
-def main():
-    jobs = [(m, a, w) for m in VALIDATION_MATERIALS for a in ANGLES for w in WEIGHTS]
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--gmm", default=None, help="the leave-one-out models' GMM structure (default the build's)")
+    ap.add_argument("--w-gmm", type=float, default=None, help="the GMM prior's weight (default Config's)")
+    args = ap.parse_args(argv)
+    weights = {} if args.w_gmm is None else {"w_gmm": args.w_gmm}
+    name = setting_name(weights, args.gmm)
+    jobs = [(m, a, weights, args.gmm) for m in VALIDATION_MATERIALS for a in ANGLES]
     with ProcessPoolExecutor(2) as pool:
         rows = list(pool.map(_run, jobs))
-    print("| material | angle | " + " | ".join("w_gmm %g: paper (mean material)" % w for w in WEIGHTS) + " |")
-    print("|---|---|" + "---|" * len(WEIGHTS))
-    for m in VALIDATION_MATERIALS:
-        for a in ANGLES:
-            cells = [r for w in WEIGHTS for r in rows if (r["material"], r["angle"], r["w_gmm"]) == (m, a, w)]
-            print("| %s | %d | %s |" % (m, a, " | ".join("%.3f (%.3f)" % (r["brdf_eq20_paper"], r["mean_material_paper"])
-                                                     for r in cells)))
-    summary = {}
-    for w in WEIGHTS:
-        mine = [r for r in rows if r["w_gmm"] == w]
-        ratio = np.array([r["brdf_eq20_paper"] / r["mean_material_paper"] for r in mine])
-        summary["%g" % w] = {"wins": int((ratio < 1).sum()), "cases": len(mine), "median_ratio": float(np.median(ratio)),
-                             "worst_ratio": float(ratio.max()),
-                             "direction_error_max_deg": float(max(r["direction_error_deg"] for r in mine))}
-        print("w_gmm %g: BRDF (paper) better than the mean material in %d of %d, median ratio %.2f, worst %.2f, "
-              "direction error at most %.2f deg" % (w, summary["%g" % w]["wins"], len(mine), np.median(ratio),
-                                                    ratio.max(), summary["%g" % w]["direction_error_max_deg"]))
+    print("| material | angle | %s: paper (mean material) | direction error deg |\n|---|---|---|---|" % name)
+    for r in rows:
+        print("| %s | %d | %.3f (%.3f) | %.2f |" % (r["material"], r["angle"], r["brdf_eq20_paper"],
+                                                   r["mean_material_paper"], r["direction_error_deg"]))
+    ratio = np.array([r["brdf_eq20_paper"] / r["mean_material_paper"] for r in rows])
+    summary = {"wins": int((ratio < 1).sum()), "cases": len(rows), "median_ratio": float(np.median(ratio)),
+               "worst_ratio": float(ratio.max()),
+               "direction_error_max_deg": float(max(r["direction_error_deg"] for r in rows))}
+    print("%s: BRDF (paper) better than the mean material in %d of %d, median ratio %.2f, worst %.2f, "
+          "direction error at most %.2f deg" % (name, summary["wins"], len(rows), summary["median_ratio"],
+                                                summary["worst_ratio"], summary["direction_error_max_deg"]))
+    old = json.load(open(OUT)) if os.path.exists(OUT) else {}
+    settings = old.get("settings", {})
+    settings[name] = {"summary": summary, "rows": rows}
     with open(OUT, "w") as f:
-        json.dump({"command": "python benchmarks/point_validation.py", "summary": summary, "rows": rows}, f, indent=1)
+        json.dump({"command": "python benchmarks/point_validation.py [--gmm S] [--w-gmm W]",
+                   "settings": settings}, f, indent=1, sort_keys=True)
 
 
 if __name__ == "__main__":

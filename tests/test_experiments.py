@@ -12,6 +12,7 @@ from conftest import data_path
 from mi_dsbrdf.evaluation import experiment as ev
 from mi_dsbrdf.evaluation import metrics
 from mi_dsbrdf.model import model_file as model_data
+from mi_dsbrdf.model.build import GMM, gmm_structure
 from mi_dsbrdf.model.samples import samples_from_function
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
@@ -100,8 +101,9 @@ def test_run_case_scores_a_point_light(data, tmp_path):
     assert r["brdf_eq20_paper"] > r["brdf_eq20_cosine"]     # the paper's convention sees the dark half too
     assert set(r["relight"]) == {"pisa", "uffizi"}
     assert r["images"]["pisa"].shape == (2, 48, 48, 3)
-    # keyed on the shipped model: a rebuilt model does not reuse this one
-    assert os.path.exists(tmp_path / "cache" / ("loo-gold-metallic-paint-%s.npz" % ev.shipped_model_hash()))
+    # keyed on the shipped model and the GMM structure: a rebuilt model does not reuse this one
+    assert os.path.exists(tmp_path / "cache" / ("loo-gold-metallic-paint-%s-%s.npz" % (
+        ev.shipped_model_hash(), "-".join(map(str, gmm_structure(GMM))))))
 
 
 def test_runner_is_resumable_and_the_report_is_written(data, tmp_path):
@@ -175,3 +177,22 @@ def test_config_defaults_are_the_validation_choice():
         assert {k: getattr(cfg, k) for k in weights} == weights, f
     for scores in (choice["settings"][choice["best"]], choice["shipped"]):   # the sweep's pick, the shipped code
         assert all(scores[k]["median_ratio"] < 1 for k in choice["measures"])   # both beat doing nothing
+
+
+def test_the_shipped_gmm_is_the_validation_choice():
+    """The GMM's structure (build.GMM, the shipped model) and weight (Config.w_gmm)
+    are those of the best setting under validation/, every one scored on the same cases."""
+    from mi_dsbrdf.config import Config
+    from mi_dsbrdf.model import build, model_file
+    import natural_light
+    with open(natural_light.GMM_CHOICE) as f:
+        choice = json.load(f)
+    assert all(v["cases"] == choice["cases"] for v in choice["settings"].values())
+    assert choice["cases"] == len(natural_light.VALIDATION_MATERIALS) * len(natural_light.VALIDATION_PROBES)
+    assert build.gmm_structure(build.GMM) == build.gmm_structure(choice["best_gmm"])
+    shipped = model_file.shipped_model().arrays
+    assert str(shipped["gmm_structure"]) == ":".join(map(str, build.gmm_structure(build.GMM)))
+    cfg = Config()
+    assert {k: getattr(cfg, k) for k in choice["best_config"]} == choice["best_config"]
+    scores = choice["settings"][choice["best"]]
+    assert all(scores[k]["median_ratio"] < 1 for k in choice["measures"])      # it beats doing nothing

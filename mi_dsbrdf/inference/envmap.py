@@ -74,9 +74,14 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     sizes = map_sizes(cfg.map_size, cfg.map_levels, len(passes))
     posteriors = {}
 
+    # every map size works on the same pixels, the full map's budget (Config.map_pairs):
+    # the coarse start has fewer texels, but it only chooses among the starts
+    max_pixels = cfg.map_pairs // (cfg.map_size[0] * cfg.map_size[1])
+
     def posterior(size):
         if size not in posteriors:
-            posteriors[size] = Posterior(texels.with_map_size(size), observed, mask, model, cfg)
+            posteriors[size] = Posterior(texels.with_map_size(size), observed, mask, model, cfg,
+                                         max_pixels=max_pixels)
         return posteriors[size]
 
     post = posterior(sizes[0])

@@ -80,9 +80,11 @@ class Posterior:
     config : :class:`~mi_dsbrdf.config.Config`
     point : (centre, distance) of a point light (kept fixed), None for a
         directional light or a map
+    max_pixels : the most pixels the posterior works on (default
+        ``config.map_pairs`` / texels; see :class:`~mi_dsbrdf.config.Config`)
     """
 
-    def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None):
+    def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None, max_pixels=None):
         self.model, self.cfg, self.point = model, config, point
         obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
@@ -92,7 +94,9 @@ class Posterior:
         n_usable = int(keep.sum())
         # the posterior's pixels (Config.map_pairs): all usable ones, or an evenly
         # spread subset whose likelihood is scaled up (``weight``) to stand for all
-        rows = spread(np.nonzero(keep)[0], max(config.map_pairs // max(texels.n_texels, 1), MIN_REFLECTANCE_PIXELS))
+        if max_pixels is None:
+            max_pixels = config.map_pairs // max(texels.n_texels, 1)
+        rows = spread(np.nonzero(keep)[0], max(int(max_pixels), MIN_REFLECTANCE_PIXELS))
         if rows.size < n_usable:
             texels, obs, keep = texels.subset(rows), obs[rows], np.ones(rows.size, bool)
         self.observed, self.keep, self.weight = obs, keep, n_usable / max(int(keep.sum()), 1)
