@@ -28,9 +28,11 @@ the relit images' (two other probes) scale-invariant log error and
 Stanford-ORB PSNR (dB); for near-Lambertian materials the recovered peak /
 off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
 
-    .venv/bin/python benchmarks/natural_light.py --set validation            # 12 cases, ~7 min
+    .venv/bin/python benchmarks/natural_light.py --set validation            # 24 cases, ~7 min
     .venv/bin/python benchmarks/natural_light.py --set validation --config w_entropy=300 w_gradient=300
     .venv/bin/python benchmarks/natural_light.py --choose   # scores the settings, writes the choice
+    .venv/bin/python benchmarks/natural_light.py --set validation --gmm full:2:0.01   # leave-one-out GMM structure
+    .venv/bin/python benchmarks/natural_light.py --choose-gmm   # every setting under validation/ -> gmm_choice.json
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
     .venv/bin/python benchmarks/natural_light.py --set report --summary      # tables from the results
     .venv/bin/python benchmarks/natural_light.py --set report --report       # -> docs/natural_light.{md,png}
@@ -53,8 +55,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "benchmarks", "results", "natural_light")
 #: validation: two materials of each kind (acrylic or phenolic, metallic paint or
 #: paint, fabric, plastic, foam or rubber, metal), an indoor probe and an urban
-#: outdoor panorama (the first six alone until the GMM's choice: 12 cases did not
-#: separate settings whose report-set results differed by 11 of 72 BRDF wins)
+#: outdoor panorama. The prior weights were chosen on the first six (12 cases,
+#: ``validation_sweep/``); the GMM's structure on all twelve (``gmm_choice.json``)
 VALIDATION_MATERIALS = ["violet-acrylic", "silver-metallic-paint", "blue-fabric", "yellow-plastic",
                         "polyurethane-foam", "nickel",
                         "specular-blue-phenolic", "dark-red-paint", "white-fabric", "gray-plastic",
