@@ -256,6 +256,11 @@ def choose(root=SWEEP, n_cases=None, command="--choose") -> dict:
             "settings": scores}
 
 
+def write_choice(choice, path) -> None:
+    with open(path, "w") as f:
+        json.dump(choice, f, indent=1)
+
+
 def choice_table(choice) -> str:
     """The settings of a :func:`choose` result as a markdown table, best first."""
     lines = ["| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
@@ -344,8 +349,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.choose_gmm:
         choice = choose(os.path.join(OUT, "validation"), command="--choose-gmm")
-        with open(GMM_CHOICE, "w") as f:
-            json.dump(choice, f, indent=1)
+        write_choice(choice, GMM_CHOICE)
         print(choice_table(choice))
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(GMM_CHOICE, ROOT)))
         return
@@ -354,8 +358,7 @@ def main(argv=None):
         shipped = os.path.join(OUT, "validation", "defaults")
         if os.path.isdir(shipped):
             choice["shipped"] = dict(setting_scores(shipped), folder=os.path.relpath(shipped, ROOT))
-        with open(CHOICE, "w") as f:
-            json.dump(choice, f, indent=1)
+        write_choice(choice, CHOICE)
         print(choice_table(choice))
         if "shipped" in choice:
             v = choice["shipped"]
@@ -367,12 +370,13 @@ def main(argv=None):
     config = parse_config(args.config)
     if (config or args.gmm) and args.set == "report":
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
-    out = os.path.join(OUT, args.set, setting_name(config, args.gmm))
+    name = setting_name(config, args.gmm)
+    out = os.path.join(OUT, args.set, name)
     if not (args.summary or args.report):
         if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         run_on_cluster(cases(args.set, config, args.adam, args.gmm), out, args.data, args.workers)
-    print("## %s, %s (%s)\n" % (args.set, setting_name(config), os.path.relpath(out, ROOT)))
+    print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))
 
 

@@ -15,13 +15,12 @@ named like ``natural_light.setting_name``).
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
-
-import argparse
 
 from experiments import CACHE, DATA
 from natural_light import VALIDATION_MATERIALS, setting_name

@@ -225,7 +225,8 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress,
                              gmm=gmm)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
-            "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm), "fit_objective": dataclasses.asdict(OBJECTIVE),
+            "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm),
+            "fit_objective": dataclasses.asdict(OBJECTIVE),
             "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
             "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
