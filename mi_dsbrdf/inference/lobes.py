@@ -45,10 +45,15 @@ class LobeJacobian:
     """Pixel radiance and its derivatives under a fixed light.
 
     image : (P, 3) radiance
-    controls : (P, 3, R, 2, 6) d radiance / d control value (``[:, :, r, 0, m]``
-        log kappa, ``[:, :, r, 1, m]`` log gamma of lobe r)
-    chromaticity : (P, 3, R) d radiance_c / d chromaticity_{r, c} (channel c
+    controls : (R, 2, 6, 3, P) d radiance / d control value (``[r, 0, m]``
+        log kappa, ``[r, 1, m]`` log gamma of lobe r)
+    chromaticity : (R, 3, P) d radiance_c / d chromaticity_{r, c} (channel c
         depends on its own chromaticity only)
+
+    Variable- and channel-major, pixels last: the chain rule to psi is one
+    matrix product over contiguous rows, and every elementwise step loops over
+    pixels (pixel-major, with the 3 channels innermost, those steps and a
+    transposing copy were four fifths of the Jacobian's time under a point light).
     """
     image: np.ndarray
     controls: np.ndarray
@@ -140,7 +145,7 @@ class LobeSum:
         lk, lg, _ = self._scalars(material)
         R = material.n_lobes
         L, s = unit_scaled(illumination)
-        sums = np.empty((R, 1 + 2 * N_CONTROL, self.n_pixels, 3))
+        sums = np.empty((R, 1 + 2 * N_CONTROL, 3, self.n_pixels))
         for p0, p1, (lc, td, w) in self._rows(JACOBIAN_CHUNK):
             basis = spline_basis(td, material.knots)
             kappa, gamma = lobe_curves(td, lk, lg, material.knots)
@@ -156,14 +161,13 @@ class LobeSum:
             dr.eval(*cols)
             A = [c.numpy().reshape(p1 - p0, self.n_texels) for c in cols]
             if self.n_texels == 1:                  # one light: the sum over texels is a product
-                flat = np.stack(A)[:, :, 0, None] * L[0]
+                flat = L[0][None, :, None] * np.stack(A)[:, None, :, 0]
             else:
-                flat = np.stack([a @ L for a in A])
-            sums[:, :, p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, p1 - p0, 3)
+                flat = np.stack([L.T @ a.T for a in A])
+            sums[..., p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         sums *= s
-        c = material.chromaticity                                   # (R, 3)
-        image = (sums[:, 0] * c[:, None, :]).sum(axis=0)
-        d_ctrl = sums[:, 1:] * c[:, None, None, :]                  # (R, 12, P, 3)
-        d_ctrl = np.ascontiguousarray(d_ctrl.transpose(2, 3, 0, 1)).reshape(self.n_pixels, 3, R, 2, N_CONTROL)
-        d_chroma = np.transpose(sums[:, 0], (1, 2, 0))              # (P, 3, R)
+        c = material.chromaticity[:, :, None]                      # (R, 3, 1)
+        image = (sums[:, 0] * c).sum(axis=0).T
+        d_ctrl = (sums[:, 1:] * c[:, None]).reshape(R, 2, N_CONTROL, 3, self.n_pixels)
+        d_chroma = sums[:, 0]                                       # (R, 3, P)
         return LobeJacobian(image, d_ctrl, d_chroma)

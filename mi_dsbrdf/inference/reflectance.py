@@ -69,13 +69,15 @@ def image_chroma_logits(observed, keep, n_lobes) -> np.ndarray:
 
 
 def psi_jacobian(basis, psi, controls_jacobian) -> np.ndarray:
-    """(P, 3, k) d radiance / d psi from d radiance / d control values (P, 3, R, 2, 6)
+    """(k, 3, P) d radiance / d psi from d radiance / d control values (R, 2, 6, 3, P)
     (:class:`~mi_dsbrdf.inference.lobes.LobeJacobian`): control values = mean +
     bases psi (Eq. 2-3), then clamped, and a clamped one does not move."""
     ctrl = basis.control_values(psi)
     free = np.stack(passed_through(ctrl[:, 0], ctrl[:, 1]), axis=1)             # (R, 2, 6)
-    P = controls_jacobian.shape[0]
-    return (controls_jacobian.reshape(P * 3, -1) @ (basis.bases * free).reshape(basis.n_bases, -1).T).reshape(P, 3, -1)
+    shape = controls_jacobian.shape[3:]
+    n = int(np.prod(controls_jacobian.shape[:3]))
+    return ((basis.bases * free).reshape(basis.n_bases, n) @ controls_jacobian.reshape(n, -1)).reshape(
+        (basis.n_bases,) + shape)
 
 
 def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None,
@@ -124,32 +126,30 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         aim(ang)
         jac = post.refl.lobes.jacobian(material, Ls)
         image = jac.image
-        columns = [psi_jacobian(post.model.basis, p, jac.controls)]
+        columns = [psi_jacobian(post.model.basis, p, jac.controls)]             # each (n, 3, P)
         if fit_chroma:
             c = softmax_chroma(z)
             dc_dz = softmax_jacobian(c)                                          # (R, 3, 2)
             # channel c depends on chromaticity (r, c) only
-            columns.append(np.einsum("pcr,rck->pcrk", jac.chromaticity, dc_dz).reshape(image.shape[0], 3, -1))
+            columns.append(np.einsum("rcp,rck->rkcp", jac.chromaticity, dc_dz).reshape(2 * R, 3, -1))
         if fit_scale:
-            columns.append(image[:, :, None])
+            columns.append(image.T[None])
         if ang is not None:
             for j in range(2):
                 e = np.zeros(2)
                 e[j] = DIRECTION_STEP
                 hi, lo = [(aim(ang + sgn * e), post.refl.lobes.render(material, Ls))[1] for sgn in (1, -1)]
-                columns.append(((hi - lo) / (2 * DIRECTION_STEP))[:, :, None])
+                columns.append(((hi - lo) / (2 * DIRECTION_STEP)).T[None])
             aim(ang)
-        J = np.concatenate(columns, axis=2)
-        J = J[view.keep].reshape(-1, J.shape[2])
-        mp = np.maximum(image[view.keep], 0) + post.offset
-        d = (np.log(mp) - np.log(np.maximum(view.observed[view.keep], 0) + post.offset)).reshape(-1)
-        Jd = J / mp.reshape(-1, 1)
-        # IRLS weights of the Laplacian, graduated: while most residuals are large the
-        # kink is widened to their median (least squares far away, L1 near the optimum)
+        keep = view.keep
+        J = np.concatenate(columns, axis=0)[:, :, keep].reshape(len(x), -1)   # (n, 3 x kept pixels)
+        mp = (np.maximum(image[keep], 0) + post.offset).T.reshape(-1)         # channel-major like J
+        d = np.log(mp) - np.log(np.maximum(view.observed[keep], 0) + post.offset).T.reshape(-1)
+        Jd = J / mp
         kink = max(KINK, float(np.median(np.abs(d))))
         w = view.weight / (np.sqrt(d * d + kink * kink) * post.scale)
-        H = Jd.T @ (Jd * w[:, None])
-        g = Jd.T @ (w * d)
+        H = (Jd * w) @ Jd.T
+        g = Jd @ (w * d)
         if post.model.gmm is not None:
             H[:k, :k] += post.w["gmm"] * post.model.gmm.dominant_precision(p)
             g[:k] += post.w["gmm"] * post.model.gmm.grad(p)
