@@ -135,8 +135,11 @@ def one_blas_thread() -> None:
 
 
 #: glibc's mallopt parameters: keep this much freed memory at the top of the heap
-#: instead of handing it back to the kernel at once
+#: instead of handing it back to the kernel at once, and serve allocations below
+#: the mmap threshold (glibc's largest) from the heap (a transport, 100 MB, is
+#: still mapped and unmapped on its own)
 M_TOP_PAD, TOP_PAD_BYTES = -2, 64 << 20
+M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES = -3, 32 << 20
 _allocator_tuned = False
 
 
@@ -145,9 +148,9 @@ def keep_freed_memory() -> None:
     process; nothing on other C libraries). Inference allocates and frees
     arrays of a few MB thousands of times (Jacobian columns, images, their
     products); by default glibc returned them to the kernel and the next one
-    page-faulted in again: four fifths of a point-light Jacobian's 12 ms went to
-    first touches of fresh pages (``benchmarks/inference_cases.py``: the point
-    light 128 px case 8.9 s -> 6.1 s)."""
+    page-faulted in again: a point-light Jacobian took 12 ms, 3 ms with this
+    (the 128 px point-light case of ``benchmarks/inference_cases.py``: ~9 s ->
+    ~6 s, before the light search got cheaper)."""
     global _allocator_tuned
     if _allocator_tuned:
         return
@@ -159,7 +162,7 @@ def keep_freed_memory() -> None:
         return
     mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
     mallopt(M_TOP_PAD, TOP_PAD_BYTES)
-    mallopt(-3, 32 << 20)
+    mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)
 
 
 def single_blas_thread(function):

@@ -27,6 +27,7 @@ def test_likelihood_gradient_and_stability():
     fd = finite_differences(lambda m: log_likelihood_terms(m, obs, mask, 1e-3)[0], model)
     np.testing.assert_allclose(g, fd, rtol=1e-4, atol=1e-6)
     assert np.all(g[3, 4] == 0)
+    assert log_likelihood_terms(model, obs, mask, 1e-3, grad=False) == (v, None)
     # exact fit: zero, and the kink is smooth (finite, zero gradient)
     v0, g0 = log_likelihood_terms(obs, obs, mask, 1e-3)
     assert v0 == 0.0 and np.all(g0 == 0)

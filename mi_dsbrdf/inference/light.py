@@ -33,7 +33,9 @@ SEARCH_DIRECTIONS, SEARCH_KEEP = 64, 6
 #: the search's reflectance fits run this fraction of a block's iterations (at least 5)
 SEARCH_FRACTION = 0.25
 #: function evaluations of the search's coarse Powell refinement, and of a light block
-SEARCH_POWELL_EVALS, POWELL_EVALS = 100, 400
+#: (the search at 100 took 2.5x as long, and every point case of the experiments
+#: with priors came back within 1 % in Eq. 20 at 40: docs/light_search.md)
+SEARCH_POWELL_EVALS, POWELL_EVALS = 40, 400
 
 
 def light_likelihood(post, material, theta, phi, log_intensity) -> float:

@@ -18,7 +18,7 @@ LOG_OFFSET = 1e-3
 KINK = 1e-3
 
 
-def log_likelihood_terms(model, observed, mask, offset, scale=1.0):
+def log_likelihood_terms(model, observed, mask, offset, scale=1.0, grad=True):
     """Eq. 19: a Laplacian likelihood on log pixel values,
 
         -log p(I | R, L) = sum_{p, c in mask} rho(log(model + e) - log(observed + e)) / scale,
@@ -27,8 +27,8 @@ def log_likelihood_terms(model, observed, mask, offset, scale=1.0):
     ``model``, ``observed``: (H, W, C) float arrays (observed saturated or
     invalid pixels are excluded through ``mask`` (H, W) bool); ``offset``: e,
     in image units (e.g. LOG_OFFSET times the median observed value).
-    Returns (value, d value / d model (H, W, C)); both finite for zero,
-    negative-rounded or huge model values.
+    Returns (value, d value / d model (H, W, C), or None without ``grad``); both
+    finite for zero, negative-rounded or huge model values.
     """
     if not offset > 0:
         raise ValueError("the log offset must be positive, got %r" % (offset,))
@@ -39,5 +39,7 @@ def log_likelihood_terms(model, observed, mask, offset, scale=1.0):
     d = np.where(keep, np.log(mp) - np.log(np.maximum(o, 0.0) + offset), 0.0)
     r = np.sqrt(d * d + KINK * KINK)
     value = float((r - KINK).sum()) / scale
+    if not grad:
+        return value, None
     grad = np.where(keep & (m >= 0), d / r / mp, 0.0) / scale
     return value, grad

@@ -188,7 +188,7 @@ class Posterior:
         """Eq. 19 of the pixel radiance ``image`` (P, 3) against ``observed`` (P, 3)
         at the pixels ``keep`` (P,), unweighted."""
         return log_likelihood_terms(image[:, None, :], observed[:, None, :], keep[:, None], self.offset,
-                                    self.scale)[0]
+                                    self.scale, grad=False)[0]
 
     # --- illumination ------------------------------------------------------------
     def map_likelihood(self, log_map, T, seen, grad=True) -> tuple:
@@ -196,7 +196,7 @@ class Posterior:
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
         image = apply_transport(T, L)
         lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
-                                          self.offset, self.scale)
+                                          self.offset, self.scale, grad)
         if not grad:
             return lik * self.weight, None
         return lik * self.weight, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * (L * self.weight)
