@@ -43,6 +43,12 @@ class Config:
         weight 1 the map came back as texel noise, worse than a constant map),
         the GMM prior strong (it resolves the split of gloss between material
         and light), hue and entropy at 1
+    gmm_volume : the fraction (0 to 1) of its components' volume terms the GMM
+        prior keeps: 1 is the normalised density of Eq. 6, 0 ranks psi by weight
+        and Mahalanobis distance to each component only
+        (:class:`~mi_dsbrdf.model.priors.GaussianMixture`). 1 is the validation
+        choice (``benchmarks/results/natural_light/gmm_choice.json``): 0.5 and 0
+        gave near-Lambertian materials fewer highlights but relit worse
     map_levels : the start runs on ``map_size`` halved ``map_levels - 1`` times,
         the passes on ``map_size`` (:func:`mi_dsbrdf.inference.envmap.map_sizes`)
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
@@ -65,6 +71,7 @@ class Config:
     w_hue: float = 1.0
     w_entropy: float = 1.0
     w_gradient: float = 30000.0
+    gmm_volume: float = 1.0
     map_levels: int = 2
     reflectance_pairs: int = 500_000
     map_pairs: int = 1 << 23
@@ -82,6 +89,8 @@ class Config:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
+        if not (isinstance(self.gmm_volume, (int, float)) and 0 <= self.gmm_volume <= 1):
+            raise ConfigError("gmm_volume must be a number from 0 to 1, got %r" % (self.gmm_volume,))
         for name in ("tol", "likelihood_scale"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):

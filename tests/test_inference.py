@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf.config import Config
+from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference import recover_envmap, recover_light
 from mi_dsbrdf.inference.objective import direction_from_angles
 from mi_dsbrdf.inference.reflectance import reflectance_starts
@@ -112,6 +113,26 @@ def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
     assert (~res.seen).sum() == res.log[-1]["unseen_texels"] > 0
     assert np.all(res.illumination[~res.seen] == 0) and np.all(res.illumination[res.seen] > 0)
 
+
+
+def test_envmap_inference_runs_from_the_starts_it_is_given():
+    """``starts`` replaces the mean material and the GMM means: one start, one
+    start row, and two different starts give two different results."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    cfg = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10)
+    found = []
+    for psi in (np.zeros(model.basis.n_bases), model.library_material(TRUTH).psi):
+        res = recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, cfg, colour=False, starts=[psi])
+        assert [r["pass"] for r in res.log].count("start") == 1
+        found.append((res.psi, res.log[0]["neg_log_posterior"]))
+    assert not np.allclose(found[0][0], found[1][0]) and found[0][1] != found[1][1]
+    with pytest.raises(InputError, match="starts must be"):
+        recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, cfg, starts=[np.zeros(3)])
 
 def test_coarse_to_fine_map_sizes_and_resampling():
     from mi_dsbrdf.inference.envmap import BLACK, map_sizes, resample

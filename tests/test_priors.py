@@ -40,6 +40,24 @@ def test_gmm_gradient_matches_finite_differences_and_is_finite_far_away():
         np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-6)
 
 
+
+def test_gmm_without_volume_terms_does_not_favour_the_tight_component():
+    """With its volume terms the density at a tight component's centre is far above
+    a broad one's; without them equal-weight centres score alike, and the gradient
+    and the dominant precision are those of the changed function."""
+    g = GaussianMixture([0.5, 0.5], [[0.0, 0.0], [1.0, 0.0]], [np.eye(2) * 1e-6, np.eye(2)])
+    tight, broad = np.array([0.0, 0.0]), np.array([1.0, 0.0])
+    assert g.nll(broad) - g.nll(tight) > 8
+    assert abs(g.nll(broad, volume=False) - g.nll(tight, volume=False)) < 0.5
+    x, h = np.array([0.3, 0.2]), 1e-7
+    fd = np.array([(g.nll(x + h * e, False) - g.nll(x - h * e, False)) / (2 * h) for e in np.eye(2)])
+    np.testing.assert_allclose(g.grad(x, volume=False), fd, rtol=1e-5)
+    # just off the tight centre it still dominates the density, the broad one the ranking
+    near = np.array([0.005, 0.0])
+    np.testing.assert_allclose(g.dominant_precision(near), np.eye(2) * 1e6)
+    np.testing.assert_allclose(g.dominant_precision(near, volume=False), np.eye(2))
+
+
 def test_bic_finds_three_clusters_and_em_is_seeded():
     X = three_clusters()
     sel = select_gmm(X, max_components=5)

@@ -9,7 +9,9 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      "rounds": int, "iters": int, "method": "dsbrdf" | "dsbrdf-adam" | "principled-adam" | "mean-constant"
      (probes: the model's mean material under a constant map, the do-nothing baseline),
      "spp": samples per pixel (Adam methods), "gmm": the leave-one-out model's GMM
-     structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's)}
+     structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's),
+     "start": index into :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (optional,
+     probes: run from that start alone, a diagnostic of the choice among them)}
 
 :func:`run_case` renders the truth with the measured material (the ``merl``
 plugin evaluated by the texel-sum forward model; a probe at twice the
@@ -40,6 +42,8 @@ fit is left out of bases and priors) and scores it:
 * ``baseline``: doing nothing, scored on the same case: the leave-one-out
   model's mean material (psi = 0) in every BRDF and relighting measure, and for
   probes a constant map in ``illumination_error`` on the same seen texels;
+* ``terms``: the last logged round's negative log posterior term by term
+  (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
   ``seconds``, and ``finite`` (no NaN/Inf anywhere in the result).
 """
@@ -65,6 +69,7 @@ from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_er
                                           scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.light import recover_light
+from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.build import GMM, build_from_fits, gmm_structure, save_model, stored_fits
@@ -220,8 +225,12 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             values = material.eval(samples.theta_h, samples.theta_d)
         elif method == "dsbrdf":
             ts = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)
-            result = recover_envmap(ts, img, ts.mask, model, cfg)
+            starts = None if case.get("start") is None else [reflectance_starts(model)[case["start"]]]
+            result = recover_envmap(ts, img, ts.mask, model, cfg, starts=starts)
             out["seconds"] = time.perf_counter() - t0
+            out["terms"] = {k: float(v) for k, v in result.log[-1].items()
+                            if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
+                                     "gradient")}
             material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
             values = material.eval(samples.theta_h, samples.theta_d)
         else:

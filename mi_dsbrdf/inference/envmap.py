@@ -39,6 +39,7 @@ from mi_dsbrdf.backend import single_blas_thread
 from mi_dsbrdf.brdf.chromaticity import softmax_chroma
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
+from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
@@ -56,7 +57,7 @@ def start_iters(iters) -> int:
 
 @single_blas_thread
 def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = None, colour=True,
-                   progress=None) -> Recovery:
+                   progress=None, starts=None) -> Recovery:
     """MAP estimate of the material and the illumination map of one image.
 
     Parameters
@@ -68,6 +69,9 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     config : :class:`~mi_dsbrdf.config.Config` (default: the benchmarked setting)
     colour : run the colour pass after the grey one
     progress : called with each logged row
+    starts : the psi (k,) to start from (default
+        :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts`: the mean
+        material and the GMM's means); one start skips the choice among them
     """
     cfg = config or Config()
     passes = ["grey", "colour"] if colour else ["grey"]
@@ -104,7 +108,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # one reflectance block; the best posterior starts the alternation
     best = None
     H, W = sizes[0]
-    for p0 in reflectance_starts(model):
+    for p0 in psi_starts(model, starts):
         T = post.transport(p0, logits0)
         seen = ~post.view.unseen.reshape(H, W)
         level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
@@ -155,6 +159,18 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map), 0.0), seen=seen,
                     log=rows)
+
+
+def psi_starts(model, starts=None) -> list:
+    """``starts`` as a list of (k,) float arrays, checked (InputError), or
+    :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` for None."""
+    if starts is None:
+        return reflectance_starts(model)
+    k = model.basis.n_bases
+    out = [np.asarray(p, dtype=np.float64) for p in starts]
+    if not out or any(p.shape != (k,) or not np.all(np.isfinite(p)) for p in out):
+        raise InputError("starts must be a non-empty list of finite psi vectors of %d values each" % k)
+    return out
 
 
 def posterior_at(post, psi, logits, log_map, T, seen, bins) -> tuple:

@@ -151,13 +151,20 @@ class Posterior:
         (Eq. 6), hue (Eq. 12) and, given a map, entropy (Eq. 13-15) and gradient (Eq. 16)."""
         terms = {"curve_penalty": self.curve_penalty(psi)[0]}
         if self.model.gmm is not None:
-            terms["gmm"] = self.w["gmm"] * self.model.gmm.nll(psi)
+            terms["gmm"] = self.gmm_prior(psi)[0]
         if self.model.hue_prior is not None:
             terms["hue"] = self.w["hue"] * self.model.hue_prior.nll(softmax_chroma(logits))
         if log_map is not None:
             terms["entropy"] = self.entropy(log_map, bins)[0]
             terms["gradient"] = self.gradient(log_map)[0]
         return {k: float(v) for k, v in terms.items()}
+
+    def gmm_prior(self, psi) -> tuple:
+        """(value, gradient, Gauss-Newton Hessian) of the weighted GMM prior (Eq. 6,
+        with or without its components' volume terms: ``Config.gmm_volume``).
+        The model must have a GMM."""
+        gmm, w, vol = self.model.gmm, self.w["gmm"], self.cfg.gmm_volume
+        return w * gmm.nll(psi, vol), w * gmm.grad(psi, vol), w * gmm.dominant_precision(psi, vol)
 
     def curve_penalty(self, psi) -> tuple:
         """(value, gradient, Gauss-Newton Hessian) of CURVE_PENALTY * sum of the squared

@@ -151,8 +151,9 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         H = (Jd * w) @ Jd.T
         g = Jd @ (w * d)
         if post.model.gmm is not None:
-            H[:k, :k] += post.w["gmm"] * post.model.gmm.dominant_precision(p)
-            g[:k] += post.w["gmm"] * post.model.gmm.grad(p)
+            _, g_gmm, h_gmm = post.gmm_prior(p)
+            H[:k, :k] += h_gmm
+            g[:k] += g_gmm
         _, g_curve, h_curve = post.curve_penalty(p)
         H[:k, :k] += h_curve
         g[:k] += g_curve

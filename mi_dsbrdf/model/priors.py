@@ -29,6 +29,16 @@ class GaussianMixture:
 
     weights (C,), means (C, k), covariances (C, k, k): float64 arrays;
     covariances symmetric positive definite.
+
+    Every method takes ``volume``, the fraction of each component's volume term
+    -1/2 log det Sigma_c kept: 1 (the default) is the normalised mixture density;
+    0 ranks the components by weight and Mahalanobis distance alone:
+    as a MAP prior the density rewards tight clusters (in the shipped model
+    log det Sigma is -11.3 for the component of the 48 glossy materials, +2.8
+    and +5.7 for the two broad ones that hold 17 of the 20 near-Lambertian
+    ones: 7-8 nats at their centres, ~2500 of a 3000-pixel posterior at the
+    GMM weight), which pulls diffuse images to glossy materials
+    (``benchmarks/start_diagnosis.py``). Below 1 not a normalised density.
     """
 
     def __init__(self, weights, means, covariances):
@@ -60,31 +70,33 @@ class GaussianMixture:
     def dim(self) -> int:
         return self.means.shape[1]
 
-    def _component_logs(self, x):
+    def _component_logs(self, x, volume=1.0):
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         diff = x[:, None, :] - self.means[None]                              # (M, C, k)
         sol = np.einsum("cij,mcj->mci", self._prec, diff)
-        return self._log_norm[None] - 0.5 * np.einsum("mci,mci->mc", diff, sol), sol
+        log_w = np.log(np.maximum(self.weights, 1e-300))
+        norm = log_w + float(volume) * (self._log_norm - log_w)
+        return norm[None] - 0.5 * np.einsum("mci,mci->mc", diff, sol), sol
 
-    def dominant_precision(self, psi) -> np.ndarray:
+    def dominant_precision(self, psi, volume=1.0) -> np.ndarray:
         """(k, k) inverse covariance of the component most responsible for ``psi``:
         the Gauss-Newton Hessian of -log p near psi (the reflectance block adds it)."""
-        lc, _ = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1))
+        lc, _ = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1), volume)
         return self._prec[int(np.argmax(lc[0]))]
 
-    def log_density(self, x) -> np.ndarray:
+    def log_density(self, x, volume=1.0) -> np.ndarray:
         """log p(psi) for psi of shape (k,) (returns a float) or (M, k) (returns (M,))."""
-        lc, _ = self._component_logs(x)
+        lc, _ = self._component_logs(x, volume)
         out = logsumexp(lc, axis=1)
         return float(out[0]) if np.ndim(x) == 1 else out
 
-    def nll(self, psi) -> float:
-        """-log p(psi) (Eq. 6), exact with its normalisation."""
-        return -self.log_density(np.asarray(psi, dtype=np.float64).reshape(-1))
+    def nll(self, psi, volume=1.0) -> float:
+        """-log p(psi) (Eq. 6), exact with its normalisation at ``volume`` 1."""
+        return -self.log_density(np.asarray(psi, dtype=np.float64).reshape(-1), volume)
 
-    def grad(self, psi) -> np.ndarray:
+    def grad(self, psi, volume=1.0) -> np.ndarray:
         """d(-log p)/d psi = sum_c resp_c Sigma_c^-1 (psi - mu_c), shape (k,)."""
-        lc, sol = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1))
+        lc, sol = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1), volume)
         resp = np.exp(lc - logsumexp(lc, axis=1, keepdims=True))
         return (resp[:, :, None] * sol).sum(axis=1)[0]
 
