@@ -9,6 +9,7 @@ beside the model's mean material (psi = 0).
 
     .venv/bin/python benchmarks/point_validation.py                       # 24 cases, ~3 min on 2 cores
     .venv/bin/python benchmarks/point_validation.py --gmm full:2:0.01 --w-gmm 100
+    .venv/bin/python benchmarks/point_validation.py --config gmm_volume=0.5
 
 Adds its setting to ``benchmarks/results/point_validation.json`` (``settings``,
 named like ``natural_light.setting_name``).
@@ -23,7 +24,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from experiments import CACHE, DATA
-from natural_light import VALIDATION_MATERIALS, setting_name
+from natural_light import VALIDATION_MATERIALS, parse_config, setting_name
 
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "point_validation.json")
 ANGLES = (20, 60)
@@ -48,8 +49,11 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--gmm", default=None, help="the leave-one-out models' GMM structure (default the build's)")
     ap.add_argument("--w-gmm", type=float, default=None, help="the GMM prior's weight (default Config's)")
+    ap.add_argument("--config", nargs="*", help="other Config overrides, name=value (e.g. gmm_volume=0.5)")
     args = ap.parse_args(argv)
-    weights = {} if args.w_gmm is None else {"w_gmm": args.w_gmm}
+    weights = parse_config(args.config)
+    if args.w_gmm is not None:
+        weights["w_gmm"] = args.w_gmm
     name = setting_name(weights, args.gmm)
     jobs = [(m, a, weights, args.gmm) for m in VALIDATION_MATERIALS for a in ANGLES]
     with ProcessPoolExecutor(2) as pool:
@@ -69,7 +73,7 @@ def main(argv=None):
     settings = old.get("settings", {})
     settings[name] = {"summary": summary, "rows": rows}
     with open(OUT, "w") as f:
-        json.dump({"command": "python benchmarks/point_validation.py [--gmm S] [--w-gmm W]",
+        json.dump({"command": "python benchmarks/point_validation.py [--gmm S] [--w-gmm W] [--config k=v ...]",
                    "settings": settings}, f, indent=1, sort_keys=True)
 
 
