@@ -46,8 +46,9 @@ def test_recover_writes_the_result_directory(case, tmp_path):
     assert any("Powell" in n for n in log["needs"]) and all(math.isfinite(r["neg_log_posterior"]) for r in log["rounds"])
     # scene.xml re-renders the input with the recovered material and light, from any working directory
     rerender = np.array(mi.render(mi.load_file(str(out / "scene.xml")), spp=64, seed=1))
-    lit = img.mean(axis=2) > 1e-2 * img.mean()
-    assert np.median(np.abs(np.log(rerender[lit]) - np.log(img[lit]))) < 0.05
+    # (log with the likelihood's offset: at 64 spp a dark channel of a lit pixel can render as 0)
+    lit, e = img.mean(axis=2) > 1e-2 * img.mean(), 1e-3 * img.mean()
+    assert np.median(np.abs(np.log(rerender[lit] + e) - np.log(img[lit] + e))) < 0.05
     # the material loads into the plugin and evaluates
     from mi_dsbrdf import load_material
     v = load_material(str(out / "material.json")).eval([0.1], [0.2])
