@@ -58,6 +58,9 @@ def test_the_gmm_structure_is_an_option_of_the_build():
     def smallest_variance(a):
         return np.diagonal(a["gmm_covariances"], axis1=1, axis2=2).min(axis=1)
     assert np.all(smallest_variance(wide) > smallest_variance(two))
+    tied = build_model.build_from_fits(fits, k=4, refit=False, progress=False, gmm="tied:2:0.01")
+    assert str(tied["gmm_structure"]) == "tied:2:0.01"
+    np.testing.assert_array_equal(tied["gmm_covariances"][0], tied["gmm_covariances"][1])
     for bad in ("full", "full:0:0.1", "mixed:2:0.1", "full:2:x"):
         with pytest.raises(ModelError, match="GMM structure"):
             build_model.gmm_structure(bad)

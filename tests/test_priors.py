@@ -69,6 +69,18 @@ def test_bic_finds_three_clusters_and_em_is_seeded():
     np.testing.assert_array_equal(a.means, b.means)
 
 
+def test_tied_covariance_is_shared_and_finds_the_clusters():
+    """A tied mixture: one covariance for every component (so equal volumes),
+    the pooled within-cluster spread, and fewer parameters than a full one."""
+    rng = np.random.default_rng(3)
+    X = np.concatenate([rng.normal(0, 0.2, (80, 2)), rng.normal(0, 2.0, (80, 2)) + [10, 0]])
+    full, _ = fit_gmm(X, 2, "full", seed=0)
+    tied, _ = fit_gmm(X, 2, "tied", seed=0)
+    np.testing.assert_array_equal(tied.covariances[0], tied.covariances[1])
+    np.testing.assert_allclose(np.sort(tied.means[:, 0]), [0, 10], atol=0.5)
+    assert np.linalg.det(full.covariances).min() < 0.1 * np.linalg.det(full.covariances).max()
+    assert tied.n_parameters("tied") == 1 + 2 * 2 + 3 < full.n_parameters("full")
+
 def test_held_out_density_prefers_the_true_clusters():
     """Leave-one-out -log p (what benchmarks/gmm_selection.py scores) is lowest for
     the three clusters the data has."""

@@ -149,7 +149,7 @@ def main(argv=None):
     p.add_argument("--fits-from", default=None, metavar="MODEL",
                    help="reuse the full per-material fits stored in this model file")
     p.add_argument("--gmm", default=GMM, metavar="STRUCTURE",
-                   help="the GMM prior's structure: 'bic' or 'full|diag:components:reg' (default %s)" % GMM)
+                   help="the GMM prior's structure: 'bic' or 'full|diag|tied:components:reg' (default %s)" % GMM)
     p.add_argument("--force", action="store_true", help="replace an existing model file")
     p.set_defaults(func=cmd_build_model)
 

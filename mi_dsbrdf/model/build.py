@@ -49,7 +49,8 @@ GMM = "bic"
 
 def gmm_structure(text) -> tuple:
     """``"bic"`` -> ("bic",): 1-5 components of full and diagonal covariances, the
-    lowest BIC; ``"full:2:0.01"`` -> ("full", 2, 0.01): that covariance type and
+    lowest BIC; ``"full:2:0.01"`` -> ("full", 2, 0.01): that covariance type (full,
+    diag or tied: one shared by the components, :func:`~mi_dsbrdf.model.priors.fit_gmm`) and
     number of components, ``reg`` times the mean variance added to each
     covariance (:func:`~mi_dsbrdf.model.priors.fit_gmm`). ModelError otherwise."""
     text = str(text).strip().lower()
@@ -58,11 +59,12 @@ def gmm_structure(text) -> tuple:
     parts = text.split(":")
     try:
         ct, c, reg = parts[0], int(parts[1]), float(parts[2])
-        ok = len(parts) == 3 and ct in ("full", "diag") and 1 <= c <= 10 and 0 <= reg < 10
+        ok = len(parts) == 3 and ct in ("full", "diag", "tied") and 1 <= c <= 10 and 0 <= reg < 10
     except (IndexError, ValueError):
         ok = False
     if not ok:
-        raise ModelError("GMM structure %r: give 'bic' or 'full|diag:components:reg', e.g. 'full:2:0.01'" % text)
+        raise ModelError("GMM structure %r: give 'bic' or 'full|diag|tied:components:reg', e.g. 'full:2:0.01'"
+                         % text)
     return ct, c, reg
 
 

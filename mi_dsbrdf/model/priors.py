@@ -102,6 +102,8 @@ class GaussianMixture:
 
     def n_parameters(self, covariance_type="full") -> int:
         C, k = self.n_components, self.dim
+        if covariance_type == "tied":
+            return (C - 1) + C * k + k * (k + 1) // 2
         cov = k * (k + 1) // 2 if covariance_type == "full" else k
         return (C - 1) + C * k + C * cov
 
@@ -109,6 +111,8 @@ class GaussianMixture:
 def fit_gmm(X, n_components, covariance_type="full", seed=0, n_init=5, max_iter=500, reg=1e-3):
     """Fit a Gaussian mixture to rows of ``X`` (M, k) by EM.
 
+    ``covariance_type``: "full", "diag" or "tied" (one full covariance shared by
+    every component: the components differ in weight and mean, not in volume).
     k-means++ starts from ``np.random.default_rng(seed)``; the best of
     ``n_init`` runs by log likelihood is returned as (GaussianMixture, loglik).
     ``reg`` times the mean per-dimension variance is added to each covariance
@@ -154,6 +158,8 @@ def _m_step(X, resp, covariance_type, floor):
         if covariance_type == "diag":
             cov = np.diag(np.diag(cov))
         covs.append(cov + floor * np.eye(X.shape[1]))
+    if covariance_type == "tied":                  # the responsibility-weighted pool of the components'
+        covs = [sum(n * c for n, c in zip(nk, covs)) / nk.sum()] * resp.shape[1]
     return GaussianMixture(weights, means, np.array(covs))
 
 
