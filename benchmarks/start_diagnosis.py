@@ -35,18 +35,18 @@ OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "start
 DOC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs", "start_diagnosis.md")
 
 
-def near_lambertian(materials, data=DATA) -> list:
-    """The materials whose measured BRDF has peak / off-peak below NEAR_LAMBERTIAN."""
+def measured_highlight_ratio(name, data=DATA) -> float:
+    """Peak / off-peak (metrics.highlight_ratio) of a MERL material's measured BRDF."""
     from mi_dsbrdf.brdf.measured import MeasuredBRDF
     from mi_dsbrdf.evaluation.metrics import highlight_ratio
     from mi_dsbrdf.model.samples import samples_from_table
-    nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
-    out = []
-    for m in materials:
-        s = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, m))
-        if highlight_ratio(s.values, s.theta_h, s.theta_d) < NEAR_LAMBERTIAN:
-            out.append(m)
-    return out
+    s = samples_from_table(MeasuredBRDF.from_nbrdf(os.path.join(data, "merl", "merl_nbrdf_weights.npz"), name))
+    return highlight_ratio(s.values, s.theta_h, s.theta_d)
+
+
+def near_lambertian(materials, data=DATA) -> list:
+    """The materials whose measured BRDF has peak / off-peak below NEAR_LAMBERTIAN."""
+    return [m for m in materials if measured_highlight_ratio(m, data) < NEAR_LAMBERTIAN]
 
 
 #: classes of the measured peak / off-peak ratio (metrics.highlight_ratio)
@@ -57,16 +57,11 @@ def gmm_by_highlight(data=DATA) -> list:
     """The shipped model's GMM -log p of its library materials' psi (in-sample),
     median per class of measured highlight ratio, with the volume terms (the
     density) and without (``volume=0``): [(lo, hi, n, with, without), ...]."""
-    from mi_dsbrdf.brdf.measured import MeasuredBRDF
-    from mi_dsbrdf.evaluation.metrics import highlight_ratio
     from mi_dsbrdf.model import model_file
-    from mi_dsbrdf.model.samples import samples_from_table
     model = model_file.shipped_model()
-    nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
     ratio, dens, plain = [], [], []
     for name in model.library:
-        s = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, name))
-        ratio.append(highlight_ratio(s.values, s.theta_h, s.theta_d))
+        ratio.append(measured_highlight_ratio(name, data))
         psi = model.library[name][0]
         dens.append(model.gmm.nll(psi))
         plain.append(model.gmm.nll(psi, volume=0))

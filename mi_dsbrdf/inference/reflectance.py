@@ -146,6 +146,8 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         mp = (np.maximum(image[keep], 0) + post.offset).T.reshape(-1)         # channel-major like J
         d = np.log(mp) - np.log(np.maximum(view.observed[keep], 0) + post.offset).T.reshape(-1)
         Jd = J / mp
+        # IRLS weights of the Laplacian, graduated: while most residuals are large the
+        # kink is widened to their median (least squares far away, L1 near the optimum)
         kink = max(KINK, float(np.median(np.abs(d))))
         w = view.weight / (np.sqrt(d * d + kink * kink) * post.scale)
         H = (Jd * w) @ Jd.T
