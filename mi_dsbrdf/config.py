@@ -43,6 +43,15 @@ class Config:
         weight 1 the map came back as texel noise, worse than a constant map),
         the GMM prior strong (it resolves the split of gloss between material
         and light), hue and entropy at 1
+    gradient_eps : eps of the hyper-Laplacian gradient prior (Eq. 16,
+        :class:`~mi_dsbrdf.inference.illumination_priors.GradientPrior`), in log
+        radiance per polar texel spacing: gradients smaller than it are priced
+        quadratically. It sets the stiffness of the illumination block: the
+        prior's curvature at a flat texel grows as eps^(alpha - 2). 0.1 (a 10 %
+        step between texels) is the validation choice
+        (``benchmarks/results/natural_light/gmm_choice.json``): at 0.01, 60
+        L-BFGS iterations stopped far from the block's minimum under a small
+        bright source, and the reflectance took up the difference as gloss
     gmm_volume : the fraction (0 to 1) of its components' volume terms the GMM
         prior keeps: 1 is the normalised density of Eq. 6, 0 ranks psi by weight
         and Mahalanobis distance to each component only
@@ -71,6 +80,7 @@ class Config:
     w_hue: float = 1.0
     w_entropy: float = 1.0
     w_gradient: float = 30000.0
+    gradient_eps: float = 0.1
     gmm_volume: float = 1.0
     map_levels: int = 2
     reflectance_pairs: int = 500_000
@@ -91,7 +101,7 @@ class Config:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
         if not (isinstance(self.gmm_volume, (int, float)) and 0 <= self.gmm_volume <= 1):
             raise ConfigError("gmm_volume must be a number from 0 to 1, got %r" % (self.gmm_volume,))
-        for name in ("tol", "likelihood_scale"):
+        for name in ("tol", "likelihood_scale", "gradient_eps"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ConfigError("%s must be a finite number > 0, got %r" % (name, value))

@@ -156,7 +156,7 @@ def test_natural_light_choice_scores_settings_against_doing_nothing(tmp_path):
                 json.dump(r, f)
     c = natural_light.choose(str(tmp_path), n_cases=2)
     assert c["best"] == "w_gradient1" and c["best_config"] == {"w_gradient": 1}
-    assert set(c["settings"]) == {"w_gradient1", "w_gradient2", "w_gradient3"}
+    assert set(c["settings"]) == {"w_gradient1", "w_gradient2"} and c["incomplete"] == {"w_gradient3": 1}
     a = c["settings"]["w_gradient1"]
     assert a["illumination_error"] == {"median_ratio": 0.5, "wins": 2} and a["score"] == pytest.approx(0.5)
     assert c["settings"]["w_gradient2"]["score"] == pytest.approx(2.5 / 3)

@@ -120,7 +120,7 @@ class Posterior:
                                        axis=1))
         self.w = config.prior_weights(n_usable)
         self.entropy = EntropyPrior(self.w["entropy"])
-        self.gradient = GradientPrior(self.w["gradient"])
+        self.gradient = GradientPrior(self.w["gradient"], eps=config.gradient_eps)
 
     def aim(self, theta, phi) -> None:
         """Light the pixels from the direction (theta, phi) (seen from the object):
