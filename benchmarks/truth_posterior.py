@@ -19,10 +19,13 @@ with model error (the DSBRDF has no phi_d and ten coefficients) the basis
 material closest to the BRDF need not be the one that renders closest to the
 image.
 
-    .venv/bin/python benchmarks/truth_posterior.py              # 36 validation cases, ~8 min on 2 cores
+    .venv/bin/python benchmarks/truth_posterior.py --probes polyhaven/quarry_01_1k.hdr   # 12 cases, ~12 min
+    .venv/bin/python benchmarks/truth_posterior.py              # all 36 validation cases, ~50 min on 2 cores
     .venv/bin/python benchmarks/truth_posterior.py --report     # -> docs/truth_posterior.md
 
-Validation materials and probes only. Writes benchmarks/results/truth_posterior.json.
+Validation materials and probes only. Each case is added to
+benchmarks/results/truth_posterior.json as it ends; a case already there is
+not run again (delete the file to start over).
 """
 from __future__ import annotations
 
@@ -153,18 +156,24 @@ def main(argv=None):
         return
     if not os.path.exists(os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
-    jobs = [(m, p) for p in args.probes for m in args.materials]
     rows = []
+    if os.path.exists(OUT):
+        with open(OUT) as f:
+            rows = json.load(f)
+    done = {(r["material"], r["probe"]) for r in rows}
+    jobs = [(m, p) for p in args.probes for m in args.materials if (m, p) not in done]
     with ProcessPoolExecutor(args.workers) as pool:      # processes: Dr.Jit in two threads can crash
         for i, r in enumerate(pool.map(_run, jobs), 1):
             rows.append(r)
+            tmp = OUT + ".tmp"
+            with open(tmp, "w") as f:
+                json.dump(rows, f, indent=1)
+            os.replace(tmp, OUT)
             a, b = r["recovered"], r["truth_fit"]
             print("[%d/%d] %-24s %-28s -log posterior recovered %8.0f truth fit %8.0f | likelihood %7.0f %7.0f"
                   " | Eq. 20 %.3f %.3f" % (i, len(jobs), r["material"], os.path.basename(r["probe"]),
                                           a["neg_log_posterior"], b["neg_log_posterior"], a["likelihood"],
                                           b["likelihood"], a["brdf_eq20_paper"], b["brdf_eq20_paper"]), flush=True)
-    with open(OUT, "w") as f:
-        json.dump(rows, f, indent=1)
     print(report(rows))
 
 

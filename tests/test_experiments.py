@@ -196,3 +196,23 @@ def test_the_shipped_gmm_is_the_validation_choice():
     assert {k: getattr(cfg, k) for k in choice["best_config"]} == choice["best_config"]
     scores = choice["settings"][choice["best"]]
     assert all(scores[k]["median_ratio"] < 1 for k in choice["measures"])      # it beats doing nothing
+
+
+def test_truth_posterior_report_counts_where_the_objective_prefers_the_recovered_answer():
+    """benchmarks/truth_posterior.py's summary: a case counts as 'the search missed it'
+    only when the truth's fit has the lower posterior, and its likelihood is counted apart."""
+    import truth_posterior
+
+    def point(post, lik, eq20):
+        return {"neg_log_posterior": post, "likelihood": lik, "gmm": 1.0, "gradient": 1.0,
+                "brdf_eq20_paper": eq20, "highlight_ratio": 1.0, "illumination_error": 0.2}
+    rows = [{"material": "a", "probe": "x/quarry.hdr", "truth_highlight_ratio": 1.1,      # objective prefers recovered
+             "recovered": point(100, 50, 1.0), "truth_fit": point(200, 40, 0.2)},
+            {"material": "b", "probe": "x/quarry.hdr", "truth_highlight_ratio": 9.0,      # the search missed it
+             "recovered": point(300, 90, 0.9), "truth_fit": point(250, 95, 0.3)}]
+    md = truth_posterior.report(rows)
+    assert "better BRDF (Eq. 20 paper) in 2 of 2 cases" in md
+    assert "lower than the recovered answer's in 1 (the search missed it) and higher in 1" in md
+    assert "its likelihood alone is lower in 1 of 2" in md
+    assert "Near-Lambertian materials (1 cases): the truth's posterior lower in 0, its likelihood lower in 1" in md
+    assert md.count("| quarry |") == 4

@@ -81,7 +81,9 @@ class GradientPrior:
     noise a lot). Lat-long aware: phi differences wrap around, are divided by
     sin theta (the angular distance between neighbouring texels of a row) and
     all differences are in units of the polar texel spacing; texels weigh by
-    solid angle. eps keeps the gradient finite at the kink |grad x| = 0.
+    solid angle. eps keeps the gradient finite at the kink |grad x| = 0, and
+    sets how stiff the prior is where the map is flat (its curvature there grows
+    as eps^(alpha - 2)); inference takes it from ``Config.gradient_eps``.
     """
 
     def __init__(self, weight=1.0, alpha=0.5, eps=1e-2):
