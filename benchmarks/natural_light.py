@@ -14,7 +14,7 @@ Two disjoint sets of materials and probes:
   only cases settings and weights are chosen on (``--set validation
   --config w_entropy=300 ...`` runs one setting into its own folder under
   ``validation/``; ``--choose`` scores the settings of ``validation_sweep/``
-  (:data:`SWEEP`) and the shipped code's ``validation/defaults``, and writes
+  (:data:`SWEEP`) and the code of that time (:data:`SWEEP_SHIPPED`), and writes
   the choice);
 * **report** (:data:`REPORT_MATERIALS` x :data:`REPORT_PROBES`): 12 materials
   spanning the four GMM clusters of the shipped model, 6 probes; run once with
@@ -214,8 +214,11 @@ CHOICE = os.path.join(OUT, "validation_choice.json")
 GMM_CHOICE = os.path.join(OUT, "gmm_choice.json")
 #: the weight sweep: every setting run before the start and the grey pass kept the
 #: lobes at the image's colour (the chromaticity start from the image was in); the
-#: weights were chosen there, and ``validation/defaults`` is the shipped code
+#: weights were chosen there, and SWEEP_SHIPPED holds the code of that time on the
+#: same cases (``validation/defaults-eps0.01``: ``defaults`` until gradient_eps became
+#: 0.1, renamed so that a run of today's defaults does not resume into it)
 SWEEP = os.path.join(OUT, "validation_sweep")
+SWEEP_SHIPPED = os.path.join(OUT, "validation", "defaults-eps0.01")
 
 
 def setting_scores(folder) -> dict:
@@ -361,7 +364,7 @@ def main(argv=None):
         return
     if args.choose:
         choice = choose()
-        shipped = os.path.join(OUT, "validation", "defaults")
+        shipped = SWEEP_SHIPPED
         if os.path.isdir(shipped):
             choice["shipped"] = dict(setting_scores(shipped), folder=os.path.relpath(shipped, ROOT))
         write_choice(choice, CHOICE)
