@@ -19,8 +19,8 @@ with model error (the DSBRDF has no phi_d and ten coefficients) the basis
 material closest to the BRDF need not be the one that renders closest to the
 image.
 
-    .venv/bin/python benchmarks/truth_posterior.py --probes polyhaven/quarry_01_1k.hdr   # 12 cases, ~12 min
-    .venv/bin/python benchmarks/truth_posterior.py              # all 36 validation cases, ~50 min on 2 cores
+    .venv/bin/python benchmarks/truth_posterior.py --probes polyhaven/quarry_01_1k.hdr   # 12 cases, ~5 min
+    .venv/bin/python benchmarks/truth_posterior.py              # all 36 validation cases, ~15 min on 2 cores
     .venv/bin/python benchmarks/truth_posterior.py --report     # -> docs/truth_posterior.md
 
 Validation materials and probes only. Each case is added to
