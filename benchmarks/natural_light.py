@@ -234,6 +234,21 @@ def setting_scores(folder) -> dict:
     return out
 
 
+def paired_against(folder, reference) -> dict:
+    """Case by case (same material and probe) against the ``reference`` folder: per
+    measure of CHOICE_MEASURES, [cases where ``folder`` is lower, cases where it is
+    higher]. Two settings' median ratios can differ by chance (single cases move with
+    the order of floating-point sums); a pairing that goes one way in most cases is
+    stronger evidence than a small difference of scores."""
+    def load(d):
+        rows = [json.load(open(f)) for f in glob.glob(os.path.join(d, "*.json"))]
+        return {(r["case"]["material"], r["case"]["probe"]): r for r in rows}
+    a, b = load(folder), load(reference)
+    both = sorted(set(a) & set(b))
+    return {key: [sum(value(a[c], key) < value(b[c], key) for c in both),
+                  sum(value(a[c], key) > value(b[c], key) for c in both)] for key in CHOICE_MEASURES}
+
+
 def parse_setting(name) -> tuple:
     """(GMM structure or None, Config overrides) of a :func:`setting_name`."""
     parts = [] if name == "defaults" else name.split("-")
@@ -255,6 +270,8 @@ def choose(root=SWEEP, n_cases=None, command="--choose") -> dict:
     if not complete:
         raise SystemExit("no complete validation setting under %s" % root)
     best = min(complete, key=lambda k: complete[k]["score"])
+    for name, v in complete.items():
+        v["against_best"] = paired_against(os.path.join(root, name), os.path.join(root, best))
     gmm, config = parse_setting(best)
     return {"command": "python benchmarks/natural_light.py " + command, "measures": list(CHOICE_MEASURES),
             "rule": "lowest mean over the measures of the median ratio to doing nothing",
@@ -273,10 +290,14 @@ def write_choice(choice, path) -> None:
 def choice_table(choice) -> str:
     """The settings of a :func:`choose` result as a markdown table, best first."""
     lines = ["| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
-             + " | score |", "|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 1)]
+             + " | score | against the best, case by case: lower / higher (%s) |" % ", ".join(CHOICE_MEASURES),
+             "|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 2)]
     for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["score"]):
-        lines.append("| %s | %d | %.0f | %s | %.3f |" % (name, v["cases"], v["seconds_median"], " | ".join(
-            "%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"]))
+        paired = v.get("against_best")
+        lines.append("| %s | %d | %.0f | %s | %.3f | %s |" % (name, v["cases"], v["seconds_median"], " | ".join(
+            "%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"],
+            "–" if paired is None or name == choice["best"] else
+            ", ".join("%d / %d" % tuple(paired[k]) for k in CHOICE_MEASURES)))
     return "\n".join(lines)
 
 

@@ -151,7 +151,8 @@ def test_natural_light_choice_scores_settings_against_doing_nothing(tmp_path):
         for i in range(n):
             base = {"brdf_eq20_paper": 1.0, "illumination_error": 2.0, "relight": {"pisa": 0.2}}
             r = {"seconds": 10.0 + i, "baseline": base, "brdf_eq20_paper": 0.5,
-                 "illumination_error": 2.0 * ratio, "relight": {"pisa": 0.2 * ratio}}
+                 "illumination_error": 2.0 * ratio, "relight": {"pisa": 0.2 * ratio},
+                 "case": {"material": "m%d" % i, "probe": "p.hdr"}}
             with open(tmp_path / name / ("%d.json" % i), "w") as f:
                 json.dump(r, f)
     c = natural_light.choose(str(tmp_path), n_cases=2)
@@ -160,6 +161,9 @@ def test_natural_light_choice_scores_settings_against_doing_nothing(tmp_path):
     a = c["settings"]["w_gradient1"]
     assert a["illumination_error"] == {"median_ratio": 0.5, "wins": 2} and a["score"] == pytest.approx(0.5)
     assert c["settings"]["w_gradient2"]["score"] == pytest.approx(2.5 / 3)
+    # case by case against the best: B's map and relit are higher in both cases, its BRDF level
+    assert c["settings"]["w_gradient2"]["against_best"] == {"brdf_eq20_paper": [0, 0], "illumination_error": [0, 2],
+                                                            "relight": [0, 2]}
 
 
 def test_config_defaults_are_the_validation_choice():
@@ -216,3 +220,23 @@ def test_truth_posterior_report_counts_where_the_objective_prefers_the_recovered
     assert "its likelihood alone is lower in 1 of 2" in md
     assert "Near-Lambertian materials (1 cases): the truth's posterior lower in 0, its likelihood lower in 1" in md
     assert md.count("| quarry |") == 4
+
+
+def test_paired_against_counts_cases_by_material_and_probe(tmp_path):
+    """natural_light.paired_against: per measure, the cases where a setting is lower
+    and higher than the reference, matched by material and probe (not by order)."""
+    import natural_light
+
+    def write(folder, material, brdf, relit):
+        os.makedirs(tmp_path / folder, exist_ok=True)
+        r = {"case": {"material": material, "probe": "p.hdr"}, "brdf_eq20_paper": brdf,
+             "illumination_error": 1.0, "relight": {"pisa": relit}}
+        with open(tmp_path / folder / (material + ".json"), "w") as f:
+            json.dump(r, f)
+    write("a", "m1", 0.5, 0.2)
+    write("a", "m2", 2.0, 0.2)
+    write("a", "only-a", 0.1, 0.1)            # no partner: not counted
+    write("ref", "m1", 1.0, 0.1)
+    write("ref", "m2", 1.0, 0.2)
+    p = natural_light.paired_against(str(tmp_path / "a"), str(tmp_path / "ref"))
+    assert p == {"brdf_eq20_paper": [1, 1], "illumination_error": [0, 0], "relight": [0, 1]}
