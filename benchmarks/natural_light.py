@@ -123,6 +123,15 @@ def cases(which, config=None, adam=False, gmm=None) -> list:
     return out
 
 
+def load_results(folder) -> list:
+    """The result dicts of a folder's cases (``<id>.json``), in file-name order."""
+    rows = []
+    for f in sorted(glob.glob(os.path.join(folder, "*.json"))):
+        with open(f) as fh:
+            rows.append(json.load(fh))
+    return rows
+
+
 def value(r, key):
     if key in ("relight", "relight_psnr"):
         return float(np.mean(list(r[key].values())))
@@ -142,7 +151,7 @@ def against_nothing(rows, key, higher_is_better=False) -> tuple:
 def summary(folder) -> str:
     """Markdown: per method and measure, the fraction of cases better than doing
     nothing and the median ratio (PSNR: median difference in dB), then every case."""
-    rows = [json.load(open(f)) for f in sorted(glob.glob(os.path.join(folder, "*.json")))]
+    rows = load_results(folder)
     by_method = {}
     for r in rows:
         by_method.setdefault(r["case"]["method"], []).append(r)
@@ -225,7 +234,7 @@ def setting_scores(folder) -> dict:
     """Per measure of CHOICE_MEASURES, the median over the folder's cases of
     (result / doing nothing) and the fraction of cases below doing nothing;
     ``score`` is the mean of those medians (lower is better)."""
-    rows = [json.load(open(f)) for f in sorted(glob.glob(os.path.join(folder, "*.json")))]
+    rows = load_results(folder)
     out = {"cases": len(rows), "seconds_median": float(np.median([r["seconds"] for r in rows]))}
     for key in CHOICE_MEASURES:
         wins, median = against_nothing(rows, key)
@@ -241,8 +250,7 @@ def paired_against(folder, reference) -> dict:
     the order of floating-point sums); a pairing that goes one way in most cases is
     stronger evidence than a small difference of scores."""
     def load(d):
-        rows = [json.load(open(f)) for f in glob.glob(os.path.join(d, "*.json"))]
-        return {(r["case"]["material"], r["case"]["probe"]): r for r in rows}
+        return {(r["case"]["material"], r["case"]["probe"]): r for r in load_results(d)}
     a, b = load(folder), load(reference)
     both = sorted(set(a) & set(b))
     return {key: [sum(value(a[c], key) < value(b[c], key) for c in both),

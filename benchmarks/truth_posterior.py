@@ -44,7 +44,6 @@ OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "truth
 DOC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs", "truth_posterior.md")
 #: L-BFGS iterations of the illumination block that fits the true map to the truth's basis fit
 REFINE_ITERS = 300
-TERMS = ("neg_log_posterior", "likelihood", "gmm", "gradient", "entropy", "hue", "curve_penalty")
 
 
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
@@ -76,28 +75,29 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     post = Posterior(ts, img, ts.mask, model, cfg)
     seen, small = rec.seen, ex.downsample(truth, H, W)
 
-    def point(psi, logits, log_map):
-        T = post.transport(psi, logits)
-        bins = post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
-        total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins)
+    def bins_for(log_map):                  # as recover_envmap fixes them: unseen texels at the darkest seen
+        return post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
+
+    def point(psi, logits, log_map, T):
+        total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins_for(log_map))
         values = post.material(psi, logits).eval(samples.theta_h, samples.theta_d)
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
         return dict(neg_log_posterior=total, likelihood=lik, **terms,
                     brdf_eq20_paper=log_rmse_scale_invariant(values, samples.values, samples.cos_i, "paper")[0],
                     highlight_ratio=highlight_ratio(values, samples.theta_h, samples.theta_d),
-                    illumination_error=scale_invariant_log_error(L, small, seen)), T, bins
+                    illumination_error=scale_invariant_log_error(L, small, seen))
 
-    recovered, _, _ = point(rec.psi, chroma_logits(rec.chromaticity),
-                            np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK))
+    logits_r = chroma_logits(rec.chromaticity)
+    recovered = point(rec.psi, logits_r, np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK),
+                      post.transport(rec.psi, logits_r))
     fit = fit_basis(samples, model.basis).material
     psi_t, logits_t = fit.psi, chroma_logits(fit.chromaticity)
-    T = post.transport(psi_t, logits_t)
+    T = post.transport(psi_t, logits_t)                         # the truth's fit: one transport serves all below
     level = np.median(post.observed[post.keep] / np.maximum(apply_transport(T, small.reshape(-1, 3))[post.keep],
                                                             1e-300))
     x = np.where(seen[..., None], np.log(np.maximum(small * level, 1e-300)), envmap.BLACK)
-    _, T, bins = point(psi_t, logits_t, x)
-    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, bins, False, REFINE_ITERS)
-    fitted, _, _ = point(psi_t, logits_t, x)
+    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, bins_for(x), False, REFINE_ITERS)
+    fitted = point(psi_t, logits_t, x, T)
     return {"material": material, "probe": probe, "truth_highlight_ratio":
             highlight_ratio(samples.values, samples.theta_h, samples.theta_d),
             "recovered": recovered, "truth_fit": fitted}
