@@ -243,3 +243,31 @@ def test_explicit_xml_equals_file(tmp_path):
     wi32, wo32, *_ = directions(np.linspace(0, 1.2, 10), np.linspace(0, 1.2, 10))
     si, wo, ctx = bsdf_query(a, wi32, wo32)
     np.testing.assert_allclose(np.array(a.eval(ctx, si, wo)), np.array(b.eval(ctx, si, wo)), rtol=1e-6)
+
+
+@pytest.mark.parametrize("kappa, gamma", [(1e-3, 2e-4), (0.5, 1.0), (2.5, 12.0), (30.0, 7.0), (59.0, 1e4)])
+def test_lobe_energy_matches_quadrature_and_finite_differences(kappa, gamma):
+    """log int_0^1 (exp[kappa u^gamma] - 1) du by its series, against scipy's quadrature
+    (in u = e^-t, which spreads a sharp lobe), and its derivatives."""
+    from scipy.integrate import quad
+    from mi_dsbrdf.brdf.dsbrdf import log_lobe_energy
+    lk, lg = np.log(kappa), np.log(gamma)
+    le, d_k, d_g = log_lobe_energy(lk, lg)
+    top = np.expm1(kappa)                     # u = e^-t; split where the lobe has decayed
+    f = lambda t: np.expm1(kappa * np.exp(-gamma * t)) / top * np.exp(-t)  # noqa: E731
+    edges = sorted({0.0, min(40 / gamma, 50.0), 50.0, np.inf})
+    q = sum(quad(f, a, b, limit=400, epsabs=0, epsrel=1e-11)[0] for a, b in zip(edges[:-1], edges[1:]))
+    assert le == pytest.approx(np.log(q) + np.log(top), rel=1e-8, abs=1e-8)
+    h = 1e-5
+    assert d_k == pytest.approx((log_lobe_energy(lk + h, lg)[0] - log_lobe_energy(lk - h, lg)[0]) / (2 * h), rel=1e-5)
+    assert d_g == pytest.approx((log_lobe_energy(lk, lg + h)[0] - log_lobe_energy(lk, lg - h)[0]) / (2 * h),
+                                rel=1e-4, abs=1e-9)
+
+
+def test_lobe_energy_sees_the_clamp_and_orders_lobes_by_brightness():
+    from mi_dsbrdf.brdf.dsbrdf import LOG_KAPPA_MAX, log_lobe_energy
+    le, d_k, _ = log_lobe_energy(np.array([LOG_KAPPA_MAX + 1.0]), np.array([2.0]))
+    assert le[0] == pytest.approx(log_lobe_energy(LOG_KAPPA_MAX, 2.0)[0]) and d_k[0] == 0   # clamped as a material is
+    # same peak (kappa), broader lobe: brighter; same width, higher peak: brighter
+    assert log_lobe_energy(np.log(10.0), np.log(5.0))[0] > log_lobe_energy(np.log(10.0), np.log(500.0))[0]
+    assert log_lobe_energy(np.log(12.0), np.log(50.0))[0] > log_lobe_energy(np.log(10.0), np.log(50.0))[0]

@@ -216,3 +216,41 @@ def test_gradient_prior_eps_sets_the_stiffness_of_flat_regions():
 
     stiff, soft = curvature(GradientPrior(eps=0.01)), curvature(GradientPrior(eps=0.1))
     assert stiff / soft == pytest.approx(10 ** 1.5, rel=0.05)
+
+
+def test_curve_penalty_bounds_each_lobes_energy_and_spares_the_library():
+    """The curve penalty: zero at every library material; positive for a psi whose
+    lobe is brighter than any library lobe at a control point (a box per control
+    value alone lets a large kappa meet a small gamma); its gradient and
+    Gauss-Newton Hessian against central differences there."""
+    from mi_dsbrdf.brdf.dsbrdf import log_lobe_energy
+    from mi_dsbrdf.config import Config
+    from mi_dsbrdf.inference.objective import ENERGY_MARGIN, Posterior
+    from mi_dsbrdf.model import model_file as model_data
+    from mi_dsbrdf.inference.forward import TexelSum
+    from mi_dsbrdf.app.scenes import sphere_scene
+    s = sphere_scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, 12)
+    ts = TexelSum(s, s.shapes()[0], (4, 8))
+    model = model_data.shipped_model()
+    post = Posterior(ts, np.ones((12, 12, 3)), ts.mask, model, Config(map_size=(4, 8)))
+    names = list(model.library)
+    for name in names:
+        assert post.curve_penalty(model.library_material(name).psi)[0] == 0.0, name
+    # the library's brightest sharpest lobe at grazing theta_d, pushed brighter along psi
+    ctrl = np.stack([model.basis.control_values(model.library_material(n).psi) for n in names])
+    r, j = post.R - 1, 5
+    i = int(np.argmax(log_lobe_energy(ctrl[:, r, 0, j], ctrl[:, r, 1, j])[0]))
+    psi0 = model.library_material(names[i]).psi
+    A = post.curve_map[1].reshape(post.R, 2, 6, post.k)
+    d_k = log_lobe_energy(ctrl[i, r, 0, j], ctrl[i, r, 1, j])[1]
+    direction = A[r, 0, j] * d_k                                      # raises that lobe's energy there
+    psi = psi0 + (ENERGY_MARGIN + 0.3) / (direction @ direction) * direction
+    c = model.basis.control_values(psi)
+    assert log_lobe_energy(c[r, 0, j], c[r, 1, j])[0] > post.energy_max[r, j]
+    v, g, H = post.curve_penalty(psi)
+    assert v > 0
+    h = 1e-6
+    fd = np.array([(post.curve_penalty(psi + h * e)[0] - post.curve_penalty(psi - h * e)[0]) / (2 * h)
+                   for e in np.eye(post.k)])
+    np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-6)
+    assert np.all(np.linalg.eigvalsh(H) > -1e-9) and g @ direction > 0     # descent lowers the energy

@@ -21,6 +21,7 @@ import math
 import os
 
 import numpy as np
+from scipy.special import gammaln, logsumexp
 
 from mi_dsbrdf.brdf.angles import log_cos_h
 from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
@@ -74,6 +75,26 @@ def lobe_value(log_cos_h, kappa, gamma):
     (1/sr), from log cos theta_h (guarded at log 1e-30) and the lobe's curves at theta_d."""
     o = ops(log_cos_h, kappa, gamma)
     return expm1(kappa * o.exp(gamma * o.fmax(log_cos_h, LOG_COS_H_MIN)))
+
+
+def log_lobe_energy(log_kappa, log_gamma, terms=240):
+    """log of one lobe's integral over cos theta_h, int_0^1 (exp[kappa u^gamma] - 1) du,
+    and its derivatives in log kappa and log gamma, at control values (any shape;
+    numpy float64; guards of :func:`clamp_controls` applied, where the derivatives are 0).
+
+    The integral is the series sum_n kappa^n / (n! (n gamma + 1)), summed in log
+    space (``terms`` terms: exact to float64 for kappa <= 60). It is a lobe's
+    brightness as a whole: kappa alone is its peak, while a broad lobe (small
+    gamma) of the same peak reflects far more light."""
+    lk, lg = np.asarray(log_kappa, np.float64), np.asarray(log_gamma, np.float64)
+    free_k, free_g = passed_through(lk, lg)
+    lk, lg = clamp_controls(lk, lg)
+    n = np.arange(1, terms + 1, dtype=np.float64)
+    g = np.exp(lg)[..., None]
+    t = n * lk[..., None] - gammaln(n + 1) - np.log1p(n * g)
+    le = logsumexp(t, axis=-1)
+    w = np.exp(t - le[..., None])                         # each term's share of the sum
+    return le, (w * n).sum(-1) * free_k, -(w * n * g / (1 + n * g)).sum(-1) * free_g
 
 
 def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS):

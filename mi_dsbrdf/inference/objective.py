@@ -21,7 +21,7 @@ import dataclasses
 import numpy as np
 
 from mi_dsbrdf.brdf.chromaticity import softmax_chroma
-from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.brdf.dsbrdf import Material, log_lobe_energy
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint
 from mi_dsbrdf.inference.lobes import LobeSum
@@ -31,7 +31,10 @@ from mi_dsbrdf.inference.likelihood import LOG_OFFSET, log_likelihood_terms
 #: how far (natural log) a recovered kappa/gamma control value may leave the range the
 #: library's materials span at that control point before CURVE_PENALTY applies
 CURVE_MARGIN = 1.0
-#: weight of the squared excess (log units) of a control value beyond that range
+#: how far (natural log) a recovered lobe's energy (:func:`~mi_dsbrdf.brdf.dsbrdf.log_lobe_energy`)
+#: at a control point may exceed the brightest library lobe's there before CURVE_PENALTY applies
+ENERGY_MARGIN = 0.5
+#: weight of the squared excess (log units) of a control value or a lobe's energy beyond its range
 CURVE_PENALTY = 100.0
 #: the fewest and the most pixels the reflectance block works on (16 + 6 variables:
 #: a few thousand pixels, evenly spread, constrain them as well as all of them do;
@@ -115,6 +118,11 @@ class Posterior:
         # box the unobserved, grazing end of a curve can run off to kappa = e^60)
         ctrl = np.stack([model.basis.control_values(model.library_material(n).psi) for n in model.library])
         self.curve_range = (ctrl.min(axis=0).reshape(-1) - CURVE_MARGIN, ctrl.max(axis=0).reshape(-1) + CURVE_MARGIN)
+        # a box per control value still lets a lobe combine a library's largest kappa
+        # with its smallest gamma: a broad lobe e^20 times brighter than any measured
+        # one at the unobserved theta_d (gold under a point light); each lobe's energy
+        # at each control point stays within ENERGY_MARGIN of the library's brightest
+        self.energy_max = log_lobe_energy(ctrl[:, :, 0], ctrl[:, :, 1])[0].max(axis=0) + ENERGY_MARGIN
         c0 = model.basis.control_values(np.zeros(self.k)).reshape(-1)      # control values are linear in psi
         self.curve_map = (c0, np.stack([model.basis.control_values(e).reshape(-1) - c0 for e in np.eye(self.k)],
                                        axis=1))
@@ -168,14 +176,21 @@ class Posterior:
 
     def curve_penalty(self, psi) -> tuple:
         """(value, gradient, Gauss-Newton Hessian) of CURVE_PENALTY * sum of the squared
-        excess of the kappa/gamma control values beyond ``curve_range``: ψ far from
-        the data can put a curve's unobserved (grazing) end at kappa = e^60."""
+        excess of the kappa/gamma control values beyond ``curve_range`` and of each
+        lobe's log energy beyond ``energy_max``: ψ far from the data can put a curve's
+        unobserved (grazing) end at kappa = e^60, or a bright lobe there."""
         c0, A = self.curve_map
         c = c0 + A @ psi
         excess = np.maximum(c - self.curve_range[1], 0) - np.maximum(self.curve_range[0] - c, 0)
+        # the energy of each lobe at each control point, its Jacobian in psi (R x 6, k)
+        ctrl, A_ctrl = c.reshape(self.R, 2, -1), A.reshape(self.R, 2, -1, self.k)
+        log_e, d_kappa, d_gamma = log_lobe_energy(ctrl[:, 0], ctrl[:, 1])
+        excess = np.concatenate([excess, np.maximum(log_e - self.energy_max, 0).reshape(-1)])
+        J = np.concatenate([A, (d_kappa[..., None] * A_ctrl[:, 0] + d_gamma[..., None] * A_ctrl[:, 1])
+                            .reshape(-1, self.k)])
         active = (excess != 0).astype(np.float64)
-        return (CURVE_PENALTY * float(excess @ excess), 2 * CURVE_PENALTY * A.T @ excess,
-                2 * CURVE_PENALTY * (A.T * active) @ A)
+        return (CURVE_PENALTY * float(excess @ excess), 2 * CURVE_PENALTY * J.T @ excess,
+                2 * CURVE_PENALTY * (J.T * active) @ J)
 
     def reflectance_terms(self, psi, logits, L) -> tuple:
         """(value, likelihood) of likelihood + GMM + hue priors + curve penalty at
