@@ -244,13 +244,15 @@ def setting_scores(folder) -> dict:
 
 
 def paired_against(folder, reference) -> dict:
-    """Case by case (same material and probe) against the ``reference`` folder: per
-    measure of CHOICE_MEASURES, [cases where ``folder`` is lower, cases where it is
-    higher]. Two settings' median ratios can differ by chance (single cases move with
-    the order of floating-point sums); a pairing that goes one way in most cases is
+    """Case by case (same method, material and probe: a report folder also holds the
+    Adam baselines' cases) against the ``reference`` folder: per measure of
+    CHOICE_MEASURES, [cases where ``folder`` is lower, cases where it is higher].
+    Two settings' median ratios can differ by chance (single cases move with the
+    order of floating-point sums); a pairing that goes one way in most cases is
     stronger evidence than a small difference of scores."""
     def load(d):
-        return {(r["case"]["material"], r["case"]["probe"]): r for r in load_results(d)}
+        return {(r["case"].get("method", "dsbrdf"), r["case"]["material"], r["case"]["probe"]): r
+                for r in load_results(d)}
     a, b = load(folder), load(reference)
     both = sorted(set(a) & set(b))
     return {key: [sum(value(a[c], key) < value(b[c], key) for c in both),

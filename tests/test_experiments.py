@@ -224,16 +224,19 @@ def test_truth_posterior_report_counts_where_the_objective_prefers_the_recovered
 
 def test_paired_against_counts_cases_by_material_and_probe(tmp_path):
     """natural_light.paired_against: per measure, the cases where a setting is lower
-    and higher than the reference, matched by material and probe (not by order)."""
+    and higher than the reference, matched by method, material and probe (not by
+    order: a report folder holds the Adam baselines' cases of the same material
+    and probe, and file-name order puts them last)."""
     import natural_light
 
-    def write(folder, material, brdf, relit):
+    def write(folder, material, brdf, relit, method=None):
         os.makedirs(tmp_path / folder, exist_ok=True)
-        r = {"case": {"material": material, "probe": "p.hdr"}, "brdf_eq20_paper": brdf,
-             "illumination_error": 1.0, "relight": {"pisa": relit}}
-        with open(tmp_path / folder / (material + ".json"), "w") as f:
+        r = {"case": {"material": material, "probe": "p.hdr", **({"method": method} if method else {})},
+             "brdf_eq20_paper": brdf, "illumination_error": 1.0, "relight": {"pisa": relit}}
+        with open(tmp_path / folder / ("%s-%s.json" % (method or "dsbrdf", material)), "w") as f:
             json.dump(r, f)
     write("a", "m1", 0.5, 0.2)
+    write("a", "m1", 9.0, 9.0, method="principled-adam")      # another method: not this tool's case
     write("a", "m2", 2.0, 0.2)
     write("a", "only-a", 0.1, 0.1)            # no partner: not counted
     write("ref", "m1", 1.0, 0.1)
