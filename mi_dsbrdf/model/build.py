@@ -43,10 +43,10 @@ from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration, select_gmm
 DEFAULT_K = 10
 SEED = 0
 #: the GMM prior's structure (:func:`gmm_structure`): "bic", or
-#: "covariance:components:reg". Two full components, chosen on the natural-light
-#: validation set (README, *The 2-component GMM, shipped*): BIC's four held the
-#: BRDF tighter but left near-Lambertian materials glossy
-GMM = "full:2:0.01"
+#: "covariance:components:reg". Four diagonal components, the natural-light
+#: validation set's choice (README, *The GMM's structure, again*; BIC's four full
+#: ones left near-Lambertian materials glossy)
+GMM = "diag:4:0.001"
 
 
 def gmm_structure(text) -> tuple:
