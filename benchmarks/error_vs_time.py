@@ -80,6 +80,23 @@ def not_dominated(runs, key) -> list:
             and not any(o["seconds"] <= a["seconds"] and error(o, key) <= error(a, key) for o in ours)]
 
 
+def _budget_label(case) -> str:
+    """``3 x 15`` (rounds x iterations, this tool), ``150 it`` (Adam), ``–`` (doing nothing)."""
+    if case["method"] == "dsbrdf":
+        return "%d x %d" % (case["rounds"], case["iters"])
+    return "–" if case["method"] == BASELINE else "%d it" % case["iters"]
+
+
+def _by_budget(rs) -> dict:
+    """The runs grouped by (method, budget), each group sorted by the budget's size."""
+    out = {}
+    for r in rs:
+        c = r["case"]
+        size = c.get("rounds", 1) * c.get("iters", 0) if c["method"] != BASELINE else 0
+        out.setdefault((c["method"], size), []).append(r)
+    return out
+
+
 def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
     import matplotlib
     matplotlib.use("Agg")
@@ -143,6 +160,16 @@ def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
                         worse += bool(base) and error(r, key) > error(base[0], key)
             cells.append("%d / %d" % (worse, total))
         md.append("| %s | %s |" % (method, " | ".join(cells)))
+    md += ["", "## Medians per method and budget", "",
+           "Over the %d cases (material x probe); seconds of one core:" % len(pairs), "",
+           "| method | budget | seconds | " + " | ".join(MEASURES.values()) + " |",
+           "|---|---|---|" + "---|" * len(MEASURES)]
+    for (method, budget), runs in sorted(_by_budget(rs).items(), key=lambda kv: (METHODS.index(kv[0][0])
+                                                                               if kv[0][0] in METHODS else 99,
+                                                                               kv[0][1])):
+        md.append("| %s | %s | %.1f | %s |" % (
+            method, _budget_label(runs[0]["case"]), float(np.median([r["seconds"] for r in runs])),
+            " | ".join("%.3f" % float(np.median([error(r, k) for r in runs])) for k in MEASURES)))
     md += ["", "## Where this tool's curve is not below", "",
            "An Adam run is listed under a measure when no run of this tool took no longer *and* erred no",
            "more. %d Adam runs x %d measures = %d comparisons; %d are listed." % (
@@ -164,10 +191,8 @@ def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
     for r in sorted(rs, key=lambda r: (r["case"]["material"], r["case"]["probe"], r["case"]["method"],
                                        r["seconds"])):
         c = r["case"]
-        budget = "%d x %d" % (c["rounds"], c["iters"]) if c["method"] == "dsbrdf" else \
-            "–" if c["method"] == BASELINE else "%d it" % c["iters"]
         md.append("| %s | %s | %s | %s | %.1f | %s |" % (
-            c["material"], os.path.basename(c["probe"]), c["method"], budget, r["seconds"],
+            c["material"], os.path.basename(c["probe"]), c["method"], _budget_label(c), r["seconds"],
             " | ".join("%.3f" % error(r, k) for k in MEASURES)))
     path = os.path.join(docs_dir, "error_vs_time.md")
     with open(path, "w") as f:

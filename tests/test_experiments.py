@@ -243,3 +243,31 @@ def test_paired_against_counts_cases_by_material_and_probe(tmp_path):
     write("ref", "m2", 1.0, 0.2)
     p = natural_light.paired_against(str(tmp_path / "a"), str(tmp_path / "ref"))
     assert p == {"brdf_eq20_paper": [1, 1], "illumination_error": [0, 0], "relight": [0, 1]}
+
+
+def test_error_vs_time_report_gives_medians_per_method_and_budget(tmp_path):
+    """benchmarks/error_vs_time.py's report: one median row per method and budget,
+    in budget order, over the cases (what the README's table quotes)."""
+    import error_vs_time as evt
+    res = tmp_path / "results"
+    res.mkdir()
+
+    def write(material, method, seconds, err, rounds=3, iters=15):
+        case = {"material": material, "probe": "probulator/grace.hdr", "method": method, "rounds": rounds,
+                "iters": iters}
+        r = {"case": case, "seconds": seconds, "brdf_eq20_paper": err, "brdf_eq20_cosine": err / 10,
+             "illumination_error": err / 2, "relight": {"pisa": err / 4}}
+        with open(res / ("%s-%s-%d-%d.json" % (material, method, rounds, iters)), "w") as f:
+            json.dump(r, f)
+    for m, e in (("a", 1.0), ("b", 2.0), ("c", 6.0)):
+        write(m, "dsbrdf", 10.0, e)
+        write(m, "dsbrdf", 4.0, 2 * e, rounds=1, iters=5)
+        write(m, "principled-adam", 5.0, 3 * e, iters=50)
+        write(m, "mean-constant", 0.0, 9.0)
+    text = open(evt.write_report(str(res), str(tmp_path / "docs"))).read()
+    rows = [ln for ln in text.split("## Medians per method and budget")[1].split("##")[0].splitlines()
+            if ln.startswith("| ") and not ln.startswith("| method")]
+    assert rows == ["| dsbrdf | 1 x 5 | 4.0 | 4.000 | 0.400 | 2.000 | 1.000 |",
+                    "| dsbrdf | 3 x 15 | 10.0 | 2.000 | 0.200 | 1.000 | 0.500 |",
+                    "| principled-adam | 50 it | 5.0 | 6.000 | 0.600 | 3.000 | 1.500 |",
+                    "| mean-constant | – | 0.0 | 9.000 | 0.900 | 4.500 | 2.250 |"]
