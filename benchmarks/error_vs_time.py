@@ -88,7 +88,7 @@ def _budget_label(case) -> str:
 
 
 def _by_budget(rs) -> dict:
-    """The runs grouped by (method, budget), each group sorted by the budget's size."""
+    """The runs grouped by (method, budget size: rounds x iterations; 0 for doing nothing)."""
     out = {}
     for r in rs:
         c = r["case"]
@@ -164,7 +164,7 @@ def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
            "Over the %d cases (material x probe); seconds of one core:" % len(pairs), "",
            "| method | budget | seconds | " + " | ".join(MEASURES.values()) + " |",
            "|---|---|---|" + "---|" * len(MEASURES)]
-    for (method, budget), runs in sorted(_by_budget(rs).items(), key=lambda kv: (METHODS.index(kv[0][0])
+    for (method, _), runs in sorted(_by_budget(rs).items(), key=lambda kv: (METHODS.index(kv[0][0])
                                                                                if kv[0][0] in METHODS else 99,
                                                                                kv[0][1])):
         md.append("| %s | %s | %.1f | %s |" % (
