@@ -38,10 +38,10 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from experiments import CACHE, DATA
-from natural_light import NEAR_LAMBERTIAN, VALIDATION_MATERIALS, VALIDATION_PROBES
+from natural_light import DOCS, NEAR_LAMBERTIAN, ROOT, VALIDATION_MATERIALS, VALIDATION_PROBES
 
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "truth_posterior.json")
-DOC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs", "truth_posterior.md")
+OUT = os.path.join(ROOT, "benchmarks", "results", "truth_posterior.json")
+DOC = os.path.join(DOCS, "truth_posterior.md")
 #: L-BFGS iterations of the illumination block that fits the true map to the truth's basis fit
 REFINE_ITERS = 300
 
@@ -149,10 +149,10 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.report:
         with open(OUT) as f:
-            rows = json.load(f)
+            text = report(json.load(f))
         with open(DOC, "w") as f:
-            f.write(report(rows))
-        print(report(rows))
+            f.write(text)
+        print(text)
         return
     if not os.path.exists(os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
