@@ -92,6 +92,17 @@ def test_the_do_nothing_baseline_is_scored_like_a_method(data, tmp_path):
     assert r["brdf_eq20_paper"] > 0 and r["brdf_eq20_cosine"] > 0 and set(r["relight"]) == {"pisa", "uffizi"}
 
 
+def test_a_case_s_config_overrides_its_rounds(data, tmp_path):
+    """``weights`` may name any Config field, the case's own rounds too (a validation
+    setting ``--config max_rounds=2`` ran into a TypeError before): one more round
+    in each of the two passes."""
+    def run(weights):
+        case = tiny({"id": "r", "kind": "probe", "material": "gold-metallic-paint", "probe": "probulator/grace.hdr",
+                     "priors": True, "weights": weights})
+        return ev.run_case(case, data, str(tmp_path / "cache"))
+    assert run({"max_rounds": 2})["rounds"] == run({})["rounds"] + 2
+
+
 def test_run_case_scores_a_point_light(data, tmp_path):
     case = tiny({"id": "t", "kind": "point", "material": "gold-metallic-paint", "angle": 40, "priors": True})
     r = ev.run_case(case, data, str(tmp_path / "cache"))

@@ -196,7 +196,9 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     shape = case.get("shape", "sphere")
     method = case.get("method", "dsbrdf")
     weights = case.get("weights", {}) if case.get("priors", True) else NO_PRIORS
-    cfg = Config(map_size=(H, W), max_rounds=case.get("rounds", 3), block_iters=case.get("iters", 15), **weights)
+    # the case's rounds and iterations, unless its weights (Config overrides) name them
+    cfg = Config(**{"map_size": (H, W), "max_rounds": case.get("rounds", 3), "block_iters": case.get("iters", 15),
+                    **weights})
     out = {"case": case, "specularity": specularity(name)}
     small = seen = None           # the truth map at the recovered resolution and its seen texels (probes)
     t0 = time.perf_counter()
