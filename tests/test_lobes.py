@@ -97,3 +97,29 @@ def test_unseen_texels_come_from_geometry_not_from_the_material():
     sharp = Material(np.full((1, 6), np.log(KAPPA_MAX)), np.full((1, 6), np.log(1e5)), [[1 / 3, 1 / 3, 1 / 3]])
     peak = view.transport(sharp).max(axis=(0, 1))          # the old test: relative to the largest entry
     assert (peak <= 1e-6 * peak.max()).sum() > 2 * view.unseen.sum()
+
+
+def test_texel_samples_integrate_each_texel_over_its_footprint():
+    """samples=s lights each texel from the s x s directions of the (sH x sW) grid
+    inside it: the same image as that finer map with the radiance repeated, by the
+    plugin (TexelSum) and by the fast path (LobeSum, value and Jacobian); a texel
+    is unseen only when all its directions are."""
+    material = model_data.shipped_model().library_material("chrome")
+    ts = texels(dsbrdf_bsdf(material), 24, (8, 16))
+    coarse, fine = ts.with_map_size((4, 8), samples=2), ts.with_map_size((8, 16))
+    assert (coarse.n_texels, coarse.n_directions, fine.n_texels) == (32, 128, 128)
+    L = procedural_sky(4, 8)
+    L_fine = np.repeat(np.repeat(L, 2, axis=0), 2, axis=1)
+    ref = fine.render(L_fine)
+    assert ref.max() > 0 and relative(coarse.render(L), ref) < 1e-5
+    assert relative(LobeSum(coarse).render(material, L.reshape(-1, 3)), ref) < 1e-5
+    a = LobeSum(coarse).jacobian(material, L.reshape(-1, 3))
+    b = LobeSum(fine).jacobian(material, L_fine.reshape(-1, 3))
+    assert relative(a.image, b.image) < 1e-5 and relative(a.controls, b.controls) < 1e-5
+    assert relative(a.chromaticity, b.chromaticity) < 1e-5
+    unseen_fine = LobeSum(fine).unseen.reshape(4, 2, 8, 2).transpose(0, 2, 1, 3).reshape(32, 4)
+    assert np.array_equal(LobeSum(coarse).unseen, unseen_fine.all(axis=1))
+    # the centres of a chrome sphere's coarse texels miss what the integral sees
+    assert relative(ts.with_map_size((4, 8)).render(L), ref) > 0.05
+    with pytest.raises(ValueError, match="samples"):
+        ts.with_map_size((4, 8), samples=0)

@@ -84,7 +84,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
 
     def posterior(size):
         if size not in posteriors:
-            posteriors[size] = Posterior(texels.with_map_size(size), observed, mask, model, cfg,
+            posteriors[size] = Posterior(texels.with_map_size(size, cfg.texel_samples), observed, mask, model, cfg,
                                          max_pixels=max_pixels)
         return posteriors[size]
 

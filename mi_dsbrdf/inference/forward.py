@@ -7,7 +7,12 @@ surface point x_p is
     I_p = sum_t L_t f(d_t, w_p) max(0, n_p . d_t) V(x_p, d_t) Omega_t
 
 (f the BSDF of the object, w_p the direction to the camera, V the visibility,
-only traced for non-convex objects). Unlike Monte Carlo rendering this is
+only traced for non-convex objects). With ``samples`` s > 1 each texel is
+lit from s x s directions of its footprint, each with its share of the solid
+angle (the sum over t then runs over them, L_t shared): the map as a
+piecewise-constant function of direction, as a camera sees it. From the texel
+centres alone a lobe narrower than the texel spacing sparkles where the image
+is smooth (``benchmarks/texel_sampling.py``). Unlike Monte Carlo rendering this is
 noise-free, so gradients are exact and the optimiser can use line searches.
 Geometry comes from Mitsuba (one ray through each pixel centre); the BSDF is
 the scene's ``dsbrdf`` (or any) Mitsuba BSDF, evaluated by Dr.Jit on
@@ -41,9 +46,10 @@ class TexelSum:
     map_size : (H, W) of the illumination map
     visibility : trace shadow rays (non-convex objects)
     to_world : 4x4 matrix of the envmap's to_world (default identity)
+    samples : directions per texel side (s x s per texel, module doc)
     """
 
-    def __init__(self, scene, shape, map_size, visibility=False, to_world=None):
+    def __init__(self, scene, shape, map_size, visibility=False, to_world=None, samples=1):
         sensor = scene.sensors()[0]
         w, h = (int(v) for v in sensor.film().crop_size())
         self.image_size = (h, w)
@@ -65,23 +71,30 @@ class TexelSum:
         self.bsdf = shape.bsdf()
         self._scene, self._trace = scene, visibility
         self._to_world = None if to_world is None else np.asarray(to_world, dtype=np.float64)[:3, :3]
-        self._map(map_size)
+        self._map(map_size, samples)
 
-    def _map(self, map_size):
+    def _map(self, map_size, samples=1):
         H, W = (int(v) for v in map_size)
+        s = int(samples)
+        if s < 1:
+            raise ValueError("samples per texel side must be >= 1, got %r" % (samples,))
         self.map_size = (H, W)
-        d = latlong_directions(H, W).reshape(-1, 3)
+        # the (H s) x (W s) grid's directions, ordered texel by texel (the s x s
+        # directions of a texel contiguous), each its share of the solid angle
+        d = latlong_directions(H * s, W * s).reshape(H, s, W, s, 3).transpose(0, 2, 1, 3, 4).reshape(-1, 3)
+        omega = texel_solid_angles(H * s, W * s).reshape(H, s, W, s).transpose(0, 2, 1, 3).reshape(-1)
         if self._to_world is not None:
             d = d @ self._to_world.T
             d /= np.linalg.norm(d, axis=1, keepdims=True)
-        self._light(d, texel_solid_angles(H, W).reshape(-1), None)
+        self._light(d, omega, None, s * s)
 
     # A TexelSum is never changed once made: a new light, BSDF or pixel subset
     # is a new (shallow) copy that shares the geometry.
-    def with_map_size(self, map_size) -> "TexelSum":
-        """This view under an illumination map of ``map_size`` (H, W) texels."""
+    def with_map_size(self, map_size, samples=1) -> "TexelSum":
+        """This view under an illumination map of ``map_size`` (H, W) texels, each
+        lit from ``samples`` x ``samples`` directions (module doc)."""
         out = copy.copy(self)
-        out._map(map_size)
+        out._map(map_size, samples)
         return out
 
     def with_directions(self, directions, solid_angles) -> "TexelSum":
@@ -111,8 +124,9 @@ class TexelSum:
         out.bsdf = bsdf
         return out
 
-    def _light(self, directions, solid_angles, position):
+    def _light(self, directions, solid_angles, position, per_texel=1):
         self.directions, self.solid_angles, self.light_position = directions, solid_angles, position
+        self.per_texel = per_texel          # consecutive directions that share one texel's radiance
         self.visibility = self._trace_visibility(self._scene) if self._trace else None
 
     def subset(self, rows) -> "TexelSum":
@@ -136,7 +150,18 @@ class TexelSum:
 
     @property
     def n_texels(self) -> int:
+        return self.n_directions // self.per_texel
+
+    @property
+    def n_directions(self) -> int:
+        """Light directions per pixel (pixel-direction pairs per pixel): texels x samples."""
         return 1 if self.light_position is not None else self.directions.shape[0]
+
+    def texel_sums(self, pairs) -> np.ndarray:
+        """(..., n_texels): sums over each texel's directions of (..., n_directions) values."""
+        if self.per_texel == 1:
+            return pairs
+        return pairs.reshape(pairs.shape[:-1] + (self.n_texels, self.per_texel)).sum(axis=-1)
 
     def _pairs(self, t0, t1):
         """Lanes for texels [t0, t1) x all pixels (pixel-major): (si, wo_local, pixel, texel)."""
@@ -150,11 +175,12 @@ class TexelSum:
         return si, wo, pix, tex
 
     def _chunks(self):
-        step = max(1, CHUNK // max(self.n_pixels, 1))
-        return [(t, min(t + step, self.n_texels)) for t in range(0, self.n_texels, step)]
+        """Direction ranges [t0, t1), whole texels each."""
+        step = max(1, CHUNK // max(self.n_pixels, 1) // self.per_texel) * self.per_texel
+        return [(t, min(t + step, self.n_directions)) for t in range(0, self.n_directions, step)]
 
     def _trace_visibility(self, scene):
-        vis = np.zeros((self.n_pixels, self.n_texels), dtype=bool)
+        vis = np.zeros((self.n_pixels, self.n_directions), dtype=bool)
         for t0, t1 in self._chunks():
             si, wo, _, _ = self._pairs(t0, t1)
             if self.light_position is not None:
@@ -182,22 +208,23 @@ class TexelSum:
         """(3, P, T) float32 transport, channel-major so that the products with a
         map are matrix-vector products: radiance[p, c] = T[c, p] @ L[:, c]."""
         out = np.zeros((3, self.n_pixels, self.n_texels), dtype=np.float32)
+        k = self.per_texel
         with dr.suspend_grad():
             for t0, t1 in self._chunks():
                 si, wo, pix, tex = self._pairs(t0, t1)
                 f = self._weights(si, wo, pix, tex, t0, t1)
-                out[:, :, t0:t1] = np.array(f).reshape(3, self.n_pixels, t1 - t0)
+                out[:, :, t0 // k:t1 // k] = self.texel_sums(np.array(f).reshape(3, self.n_pixels, t1 - t0))
         return out
 
     def pair_geometry(self) -> tuple:
         """What an isotropic BRDF sees of each pixel-texel pair: (log cos theta_h,
-        theta_d, weight), three Dr.Jit Floats of P*T lanes (pixel-major), the
+        theta_d, weight), three Dr.Jit Floats of P * n_directions lanes (pixel-major), the
         weight cos theta_o * solid angle (* visibility), zero unless the camera and
         the texel are both above the surface (the plugins' ``both_above``).
         :class:`~mi_dsbrdf.inference.lobes.LobeSum` evaluates the DSBRDF on them."""
         # All inputs in one array: with several fresh input arrays Dr.Jit's kernel
         # hash depends on their allocation order, and every call compiled anew.
-        P, nt = self.n_pixels, self.n_texels
+        P, nt = self.n_pixels, self.n_directions
         n_light = self.directions.shape[0]
         buf = mi.Float(np.concatenate([np.concatenate(self.frames).reshape(-1), self.directions.T.reshape(-1),
                                        self.solid_angles.reshape(-1)]).astype(np.float32))
@@ -226,7 +253,7 @@ class TexelSum:
     def _radiance_chunks(self, illumination):
         """Yield (P,) Color3f radiance from each chunk of texels under
         ``illumination`` (T, 3), with whatever AD graph the BSDF parameters carry."""
-        L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
+        L = np.repeat(np.asarray(illumination, dtype=np.float32).reshape(-1, 3), self.per_texel, axis=0)
         Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
         for t0, t1 in self._chunks():
             si, wo, pix, tex = self._pairs(t0, t1)

@@ -69,6 +69,7 @@ class LobeSum:
     def __init__(self, texels: TexelSum):
         self.texels = texels
         self.n_pixels, self.n_texels = texels.n_pixels, texels.n_texels
+        self.n_directions = texels.n_directions              # pairs per pixel: texels x samples
 
     @functools.cached_property
     def geometry(self) -> tuple:
@@ -82,8 +83,8 @@ class LobeSum:
         material: below every pixel's horizon, or blocked. (A test on the transport
         instead, relative to its largest entry, hid most of a map behind one sharp
         lobe's peak.)"""
-        w = self.geometry[2].numpy().reshape(self.n_pixels, self.n_texels)
-        return ~(w > 0).any(axis=0)
+        w = self.geometry[2].numpy().reshape(self.n_pixels, self.n_directions)
+        return ~self.texels.texel_sums((w > 0).any(axis=0)[None].astype(np.int64))[0].astype(bool)
 
     def subset(self, rows) -> "LobeSum":
         """The same view restricted to the pixels ``texels.pixels[rows]``."""
@@ -98,13 +99,13 @@ class LobeSum:
     # --- kernels -----------------------------------------------------------------
     def _rows(self, chunk):
         """Pixel ranges [p0, p1) of at most ``chunk`` pairs, and their geometry."""
-        step = max(1, chunk // max(self.n_texels, 1))
+        step = max(1, chunk // max(self.n_directions, 1))
         if step >= self.n_pixels:
             yield 0, self.n_pixels, self.geometry
             return
         for p0 in range(0, self.n_pixels, step):
             p1 = min(p0 + step, self.n_pixels)
-            lanes = dr.arange(mi.UInt32, p0 * self.n_texels, p1 * self.n_texels)
+            lanes = dr.arange(mi.UInt32, p0 * self.n_directions, p1 * self.n_directions)
             yield p0, p1, [dr.gather(mi.Float, a, lanes) for a in self.geometry]
 
     @staticmethod
@@ -128,7 +129,7 @@ class LobeSum:
             rgb = [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
             dr.eval(*rgb)
             for c in range(3):
-                out[c, p0:p1] = rgb[c].numpy().reshape(p1 - p0, self.n_texels)
+                out[c, p0:p1] = self.texels.texel_sums(rgb[c].numpy().reshape(p1 - p0, self.n_directions))
         return out
 
     def transport(self, material) -> np.ndarray:
@@ -160,7 +161,7 @@ class LobeSum:
                 d_kappa, d_gamma = e * u, (e * k) * (x * ex)
                 cols += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
             dr.eval(*cols)
-            A = [c.numpy().reshape(p1 - p0, self.n_texels) for c in cols]
+            A = [self.texels.texel_sums(c.numpy().reshape(p1 - p0, self.n_directions)) for c in cols]
             if self.n_texels == 1:                  # one light: the sum over texels is a product
                 flat = L[0][None, :, None] * np.stack(A)[:, None, :, 0]
             else:

@@ -1,0 +1,109 @@
+"""How far is the texel-centre forward model from the image of the same map?
+
+:class:`~mi_dsbrdf.inference.forward.TexelSum` lights each pixel from the
+centre of every texel of the lat-long map, each with its texel's solid angle.
+A camera (or an independent renderer) sees the map as a piecewise-constant
+function of direction, integrated over each texel's footprint. For a lobe
+narrower than the texel spacing the two differ: the centre sum sparkles where
+the integral is smooth. This script measures that difference, with the
+measured (MERL) material, per map size:
+
+* **centre vs integrated**: the image of a map of H x W texels from their
+  centres, against the same map integrated over 256 x 512 directions (each
+  texel as 256 / H x 512 / W of them, each its share of the solid angle);
+* **the truth's convergence**: the experiments render their truth from the probe
+  downsampled to 64 x 128 (centres); against the probe at its own resolution
+  (up to 256 x 512) integrated the same way.
+
+The error is the mean and 90th percentile over the sphere's pixels of
+|log(a + o) - log(b + o)|, o = 1e-3 x the mean radiance: the likelihood's
+measure (Eq. 19), whose scale b is ``Config.likelihood_scale`` (0.05).
+Validation materials and probes only (``natural_light.py``).
+
+    .venv/bin/python benchmarks/texel_sampling.py        # ~5 min on 2 cores
+
+Writes ``benchmarks/results/texel_sampling.json`` and prints the table.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+
+from experiments import DATA
+from natural_light import VALIDATION_MATERIALS, VALIDATION_PROBES
+
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "texel_sampling.json")
+#: map sizes of the inference (the start's, the benchmarked one's) and of the experiments' truth
+SIZES = [(16, 32), (32, 64), (64, 128)]
+#: the truth's reference resolution
+FINE = (256, 512)
+RES = 64
+
+
+def log_error(a, b) -> tuple:
+    """(mean, 90th percentile) of |log(a + o) - log(b + o)| over pixels and channels."""
+    o = 1e-3 * float(np.mean(b))
+    e = np.abs(np.log(a + o) - np.log(b + o))
+    return float(e.mean()), float(np.percentile(e, 90))
+
+
+def measure(material, data=DATA) -> list:
+    """One row per validation probe (the transports do not depend on the probe)."""
+    import mi_dsbrdf  # noqa: F401  (variant)
+    from mi_dsbrdf.app.io import read_image
+    from mi_dsbrdf.evaluation import experiment as ev
+    from mi_dsbrdf.inference.forward import apply_transport
+    merl = {"type": "merl", "nbrdf": os.path.join(data, "merl", "merl_nbrdf_weights.npz"), "material": material}
+    fine_ts = ev.texels(merl, RES, FINE)
+    fine = fine_ts.transport()                    # (3, P, 256 * 512) float32, about 5 GB
+    coarse = {hw: ev.texels(merl, RES, hw).transport() for hw in SIZES}
+    rows = []
+    for probe in VALIDATION_PROBES:
+        env = read_image(os.path.join(data, "envmaps", probe))[..., :3]
+        row = {"material": material, "probe": probe}
+        for (h, w), T in coarse.items():
+            m = ev.downsample(env, h, w)
+            f = FINE[0] // h                      # each texel as f x f fine directions
+            integrated = apply_transport(fine, np.repeat(np.repeat(m, f, axis=0), f, axis=1))
+            row["%dx%d" % (h, w)] = log_error(apply_transport(T, m), integrated)
+        # the probe at its own resolution up to 256 x 512 (the probulator probes are 128 x 256)
+        h0 = min(env.shape[0], FINE[0])
+        f = FINE[0] // h0
+        probe_map = np.repeat(np.repeat(ev.downsample(env, h0, 2 * h0), f, axis=0), f, axis=1)
+        truth = apply_transport(coarse[(64, 128)], ev.downsample(env, 64, 128))
+        row["truth_64x128_vs_probe"] = log_error(truth, apply_transport(fine, probe_map))
+        rows.append(row)
+    return rows
+
+
+def table(rows) -> str:
+    keys = ["%dx%d" % s for s in SIZES] + ["truth_64x128_vs_probe"]
+    lines = ["| material | probe | " + " | ".join(k.replace("_", " ") for k in keys) + " |",
+             "|---|---|" + "---|" * len(keys)]
+    for r in rows:
+        lines.append("| %s | %s | " % (r["material"], os.path.basename(r["probe"]).split(".")[0])
+                     + " | ".join("%.3f (%.3f)" % tuple(r[k]) for k in keys) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    import argparse
+    from concurrent.futures import ProcessPoolExecutor
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=2, help="processes (each holds a 5 GB transport)")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(args.workers) as pool:   # processes: Dr.Jit in two threads can crash
+        rows = [r for rows in pool.map(measure, VALIDATION_MATERIALS) for r in rows]
+    with open(OUT, "w") as f:
+        json.dump({"command": "python benchmarks/texel_sampling.py", "fine": FINE, "res": RES, "rows": rows,
+                   "seconds": time.perf_counter() - t0}, f, indent=1)
+    print("mean (90th percentile) |log error| per pixel and channel; Config.likelihood_scale is 0.05\n")
+    print(table(rows))
+
+
+if __name__ == "__main__":
+    main()
