@@ -33,6 +33,8 @@ off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
     .venv/bin/python benchmarks/natural_light.py --choose   # scores the settings, writes the choice
     .venv/bin/python benchmarks/natural_light.py --set validation --gmm full:2:0.01   # leave-one-out GMM structure
     .venv/bin/python benchmarks/natural_light.py --choose-gmm   # every setting under validation/ -> gmm_choice.json
+    .venv/bin/python benchmarks/natural_light.py --set validation --truth-samples 4 --config texel_samples=2 \
+        --materials violet-acrylic nickel   # truth from the probe integrated over each texel
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
     .venv/bin/python benchmarks/natural_light.py --set report --summary      # tables from the results
     .venv/bin/python benchmarks/natural_light.py --set report --report       # -> docs/natural_light.{md,png}
@@ -111,10 +113,13 @@ def setting_name(config, gmm=None) -> str:
     return name or "defaults"
 
 
-def cases(which, config=None, adam=False, gmm=None) -> list:
+def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=None) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
+    mats = [m for m in mats if materials is None or m in materials]
     extra = {} if gmm is None else {"gmm": gmm}
+    if truth_samples > 1:
+        extra["truth_samples"] = truth_samples
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
     for method in ("principled-adam", "dsbrdf-adam") if adam else ():      # after this tool's cases
@@ -259,6 +264,25 @@ def paired_against(folder, reference) -> dict:
                   sum(value(a[c], key) > value(b[c], key) for c in both)] for key in CHOICE_MEASURES}
 
 
+def against_table(folder, reference) -> str:
+    """Markdown: the scores (:func:`setting_scores`) of ``folder`` and ``reference`` on
+    their common cases' measures, and the case-by-case count (:func:`paired_against`)."""
+    pairs = paired_against(folder, reference)
+    lines = ["| setting | cases | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
+             + " | score | near-Lambertian without a highlight |", "|---|---|" + "---|" * (len(CHOICE_MEASURES) + 2)]
+    for d in (folder, reference):
+        v, rows = setting_scores(d), load_results(d)
+        near = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN]
+        clean = sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in near)
+        lines.append("| %s | %d | %s | %.3f | %d of %d |" % (
+            os.path.basename(d), v["cases"], " | ".join("%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"])
+                                                          for k in CHOICE_MEASURES), v["score"], clean, len(near)))
+    lines.append("\nCase by case, %s lower / higher than %s: %s" % (
+        os.path.basename(folder), os.path.basename(reference),
+        ", ".join("%s %d / %d" % (k, *pairs[k]) for k in CHOICE_MEASURES)))
+    return "\n".join(lines)
+
+
 def parse_setting(name) -> tuple:
     """(GMM structure or None, Config overrides) of a :func:`setting_name`."""
     parts = [] if name == "defaults" else name.split("-")
@@ -384,6 +408,13 @@ def main(argv=None):
     ap.add_argument("--choose-gmm", action="store_true",
                     help="score every setting under validation/ (GMM structures and weights) and write the "
                          "choice to %s" % os.path.relpath(GMM_CHOICE, ROOT))
+    ap.add_argument("--truth-samples", type=int, default=1, metavar="S",
+                    help="render each case's truth from the probe integrated over each texel as S x S directions "
+                         "(default 1: the texel centres); results under <set>-truth<S>/ (validation only)")
+    ap.add_argument("--materials", nargs="*", help="only these materials of the set (validation only)")
+    ap.add_argument("--against", metavar="SETTING",
+                    help="with --summary: this setting's scores and, case by case, against SETTING (a folder "
+                         "name beside it)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
@@ -408,16 +439,19 @@ def main(argv=None):
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
         return
     config = parse_config(args.config)
-    if (config or args.gmm) and args.set == "report":
+    if (config or args.gmm or args.truth_samples > 1 or args.materials) and args.set == "report":
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
     name = setting_name(config, args.gmm)
-    out = os.path.join(OUT, args.set, name)
+    out = os.path.join(OUT, args.set + ("-truth%d" % args.truth_samples if args.truth_samples > 1 else ""), name)
     if not (args.summary or args.report):
         if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
-        run_on_cluster(cases(args.set, config, args.adam, args.gmm), out, args.data, args.workers)
+        run_on_cluster(cases(args.set, config, args.adam, args.gmm, args.truth_samples, args.materials), out,
+                       args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))
+    if args.against:
+        print(against_table(out, os.path.join(os.path.dirname(out), args.against)))
 
 
 if __name__ == "__main__":

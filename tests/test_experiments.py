@@ -282,3 +282,31 @@ def test_error_vs_time_report_gives_medians_per_method_and_budget(tmp_path):
                     "| dsbrdf | 3 x 15 | 10.0 | 2.000 | 0.200 | 1.000 | 0.500 |",
                     "| principled-adam | 50 it | 5.0 | 6.000 | 0.600 | 3.000 | 1.500 |",
                     "| mean-constant | – | 0.0 | 9.000 | 0.900 | 4.500 | 2.250 |"]
+
+
+def test_natural_light_against_table_and_what_the_report_set_refuses(tmp_path):
+    """--summary --against: both settings' scores against doing nothing, the
+    near-Lambertian cases left without a highlight, and the case-by-case count;
+    the report set runs the shipped defaults only (no truth sampling, no subset)."""
+    import natural_light
+
+    def write(folder, material, brdf, highlight, truth_highlight):
+        os.makedirs(tmp_path / folder, exist_ok=True)
+        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
+        r = {"case": {"material": material, "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
+             "brdf_eq20_paper": brdf, "illumination_error": 0.5, "relight": {"pisa": 0.5},
+             "highlight_ratio": highlight, "truth_highlight_ratio": truth_highlight}
+        with open(tmp_path / folder / ("%s.json" % material), "w") as f:
+            json.dump(r, f)
+    write("new", "felt", 0.5, 1.1, 1.0)       # near-Lambertian, no highlight
+    write("new", "chrome", 2.0, 90.0, 100.0)
+    write("ref", "felt", 0.8, 5.0, 1.0)       # near-Lambertian with a highlight
+    write("ref", "chrome", 0.9, 90.0, 100.0)
+    table = natural_light.against_table(str(tmp_path / "new"), str(tmp_path / "ref"))
+    rows = table.splitlines()
+    assert rows[2].startswith("| new | 2 | 1.25×, 1 |") and rows[2].endswith("| 1 of 1 |")
+    assert rows[3].startswith("| ref | 2 | 0.85×, 2 |") and rows[3].endswith("| 0 of 1 |")
+    assert "brdf_eq20_paper 1 / 1, illumination_error 0 / 0, relight 0 / 0" in table
+    for bad in (["--truth-samples", "4"], ["--materials", "pvc"], ["--config", "texel_samples=2"]):
+        with pytest.raises(SystemExit, match="report set runs the shipped defaults"):
+            natural_light.main(["--set", "report"] + bad)

@@ -10,6 +10,8 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      (probes: the model's mean material under a constant map, the do-nothing baseline),
      "spp": samples per pixel (Adam methods), "gmm": the leave-one-out model's GMM
      structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's),
+     "truth_samples": directions per texel side of the probe's truth render (optional, default 1:
+     the texel centres; the probe's map integrated over each texel's footprint as s x s directions),
      "start": index into :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (optional,
      probes: run from that start alone, a diagnostic of the choice among them)}
 
@@ -97,11 +99,12 @@ def downsample(env, height, width) -> np.ndarray:
     return e.reshape(height, e.shape[0] // height, width, e.shape[1] // width, 3).mean(axis=(1, 3))
 
 
-def texels(bsdf: dict, res: int, map_hw=(1, 1), shape="sphere"):
+def texels(bsdf: dict, res: int, map_hw=(1, 1), shape="sphere", samples=1):
     """A :class:`~mi_dsbrdf.inference.forward.TexelSum` of ``shape`` (:func:`~mi_dsbrdf.app.scenes.shape_dict`;
-    anything but the sphere with shadow rays) carrying ``bsdf``, seen by the shipped camera."""
+    anything but the sphere with shadow rays) carrying ``bsdf``, seen by the shipped camera,
+    each texel lit from ``samples`` x ``samples`` directions."""
     scene = mi.load_dict({"type": "scene", "sensor": camera(res), "object": shape_dict(shape, bsdf)})
-    return TexelSum(scene, scene.shapes()[0], tuple(map_hw), visibility=shape != "sphere")
+    return TexelSum(scene, scene.shapes()[0], tuple(map_hw), visibility=shape != "sphere", samples=samples)
 
 
 def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
@@ -218,7 +221,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     else:
         probe = read_image(os.path.join(data, "envmaps", case["probe"]))
         truth = downsample(probe, 2 * H, 2 * W)
-        ts = texels(merl, res, (2 * H, 2 * W), shape=shape)
+        ts = texels(merl, res, (2 * H, 2 * W), shape=shape, samples=case.get("truth_samples", 1))
         img = render(ts, truth.reshape(-1, 3))
         if method == "mean-constant":
             # doing nothing: the model's mean material (psi = 0) under a constant map
