@@ -33,6 +33,10 @@ def test_cli_prints_config_and_file_errors_as_one_line(tmp_path, capsys):
                  "--rounds", "0"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("mi-dsbrdf: max_rounds must be") and "\n" not in err
+    assert main(["recover", "--scene", "x.xml", "--image", "y.exr", "--out", str(tmp_path / "o"),
+                 "--texel-samples", "0"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mi-dsbrdf: texel_samples must be") and "\n" not in err
     blocker = tmp_path / "file"
     blocker.write_text("x")
     assert main(["render", "sphere_envmap", "--out", str(blocker / "sub")]) == 1

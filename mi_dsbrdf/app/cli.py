@@ -30,7 +30,8 @@ def _setup(variant):
 def _config(args):
     """The named preset with the command line's overrides (validated)."""
     overrides = {k: v for k, v in (("map_size", args.map_size), ("max_rounds", args.rounds),
-                                   ("block_iters", args.iters)) if v is not None}
+                                   ("block_iters", args.iters), ("texel_samples", args.texel_samples))
+                 if v is not None}
     return dataclasses.replace(PRESETS[args.preset], **overrides)
 
 
@@ -114,6 +115,9 @@ def _config_arguments(p, preset):
     p.add_argument("--map-size", default=None, type=_map_size, help="illumination map HxW (overrides the preset)")
     p.add_argument("--rounds", type=int, default=None, help="rounds of alternating blocks per pass")
     p.add_argument("--iters", type=int, default=None, help="Levenberg-Marquardt iterations per reflectance block")
+    p.add_argument("--texel-samples", type=int, default=None, metavar="S",
+                   help="light each map texel from S x S directions (S^2 times the work; for sharp highlights: "
+                        "see the README, Natural light)")
 
 
 def main(argv=None):

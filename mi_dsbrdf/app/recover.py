@@ -67,7 +67,8 @@ def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=
     model = shipped_model()
     needs = decide(scene, obs, user_mask, model.basis.n_lobes, model.basis.n_bases)
     obj = dsbrdf_object(scene)
-    ts = TexelSum(scene, obj, cfg.map_size if needs.envmap_block else (1, 1), visibility=needs.visibility)
+    ts = TexelSum(scene, obj, cfg.map_size if needs.envmap_block else (1, 1), visibility=needs.visibility,
+                  samples=cfg.texel_samples if needs.envmap_block else 1)     # the re-render as inference saw it
     keep = interior(ts.mask)
     if user_mask is not None:
         keep &= user_mask
