@@ -99,7 +99,7 @@ def test_unseen_texels_come_from_geometry_not_from_the_material():
     assert (peak <= 1e-6 * peak.max()).sum() > 2 * view.unseen.sum()
 
 
-def test_texel_samples_integrate_each_texel_over_its_footprint():
+def test_texel_samples_integrate_each_texel_over_its_footprint(monkeypatch):
     """samples=s lights each texel from the s x s directions of the (sH x sW) grid
     inside it: the same image as that finer map with the radiance repeated, by the
     plugin (TexelSum) and by the fast path (LobeSum, value and Jacobian); a texel
@@ -112,6 +112,10 @@ def test_texel_samples_integrate_each_texel_over_its_footprint():
     L_fine = np.repeat(np.repeat(L, 2, axis=0), 2, axis=1)
     ref = fine.render(L_fine)
     assert ref.max() > 0 and relative(coarse.render(L), ref) < 1e-5
+    import mi_dsbrdf.inference.forward as forward
+    monkeypatch.setattr(forward, "CHUNK", 10 * coarse.n_pixels)       # several chunks of whole texels
+    assert relative(coarse.render(L), ref) < 1e-5
+    monkeypatch.undo()
     assert relative(LobeSum(coarse).render(material, L.reshape(-1, 3)), ref) < 1e-5
     a = LobeSum(coarse).jacobian(material, L.reshape(-1, 3))
     b = LobeSum(fine).jacobian(material, L_fine.reshape(-1, 3))

@@ -158,10 +158,11 @@ class TexelSum:
         return 1 if self.light_position is not None else self.directions.shape[0]
 
     def texel_sums(self, pairs) -> np.ndarray:
-        """(..., n_texels): sums over each texel's directions of (..., n_directions) values."""
+        """(..., texels): sums over each texel's directions of (..., directions) values, whole
+        texels in order (all of them, or a chunk of :meth:`_chunks`)."""
         if self.per_texel == 1:
             return pairs
-        return pairs.reshape(pairs.shape[:-1] + (self.n_texels, self.per_texel)).sum(axis=-1)
+        return pairs.reshape(pairs.shape[:-1] + (-1, self.per_texel)).sum(axis=-1)
 
     def _pairs(self, t0, t1):
         """Lanes for texels [t0, t1) x all pixels (pixel-major): (si, wo_local, pixel, texel)."""
