@@ -20,7 +20,7 @@ The error is the mean and 90th percentile over the sphere's pixels of
 measure (Eq. 19), whose scale b is ``Config.likelihood_scale`` (0.05).
 Validation materials and probes only (``natural_light.py``).
 
-    .venv/bin/python benchmarks/texel_sampling.py        # ~5 min on 2 cores
+    .venv/bin/python benchmarks/texel_sampling.py [--workers 2]   # ~12 min on one worker, 5 GB each
 
 Writes ``benchmarks/results/texel_sampling.json`` and prints the table.
 """
