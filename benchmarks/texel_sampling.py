@@ -21,6 +21,11 @@ measure (Eq. 19), whose scale b is ``Config.likelihood_scale`` (0.05).
 Validation materials and probes only (``natural_light.py``).
 
     .venv/bin/python benchmarks/texel_sampling.py [--workers 2]   # ~12 min on one worker, 5 GB each
+    .venv/bin/python benchmarks/texel_sampling.py --speed   # inference time at s = 1 and 2, side by side, ~4 min
+
+``--speed`` times ``inference_cases.py``'s natural-light case (a 128x128 sphere,
+32x64 map, two passes) at ``Config.texel_samples`` 1 and 2, alternating, twice
+each, in one process, and stores the figures under ``"speed"``.
 
 Writes ``benchmarks/results/texel_sampling.json`` and prints the table.
 """
@@ -89,12 +94,43 @@ def table(rows) -> str:
     return "\n".join(lines)
 
 
+def speed() -> dict:
+    """Seconds of the natural-light inference at texel_samples 1, 2, 1, 2 (one process)."""
+    import dataclasses
+    import mi_dsbrdf  # noqa: F401
+    from mi_dsbrdf.config import PRESETS
+    from mi_dsbrdf.evaluation.experiment import render, texels
+    from mi_dsbrdf.inference import recover_envmap
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    from mi_dsbrdf.model import model_file as model_data
+    model = model_data.shipped_model()
+    sky = procedural_sky(64, 128).astype(np.float64)
+    img = render(texels({"type": "dsbrdf", "material": "gold-metallic-paint"}, 128, (64, 128)), sky.reshape(-1, 3))
+    ts = texels({"type": "dsbrdf"}, 128, (32, 64))
+    out = {"1": [], "2": []}
+    for s in (1, 2, 1, 2):
+        t0 = time.perf_counter()
+        recover_envmap(ts, img, ts.mask, model, dataclasses.replace(PRESETS["benchmarked"], texel_samples=s))
+        out[str(s)].append(time.perf_counter() - t0)
+        print("texel_samples %d: %.1f s" % (s, out[str(s)][-1]), flush=True)
+    return {"seconds": out, "ratio": float(np.median(out["2"]) / np.median(out["1"]))}
+
+
 def main(argv=None):
     import argparse
     from concurrent.futures import ProcessPoolExecutor
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2, help="processes (each holds a 5 GB transport)")
+    ap.add_argument("--speed", action="store_true", help="time the inference at texel_samples 1 and 2 instead")
     args = ap.parse_args(argv)
+    if args.speed:
+        with open(OUT) as f:
+            stored = json.load(f)
+        stored["speed"] = dict(speed(), command="python benchmarks/texel_sampling.py --speed")
+        with open(OUT, "w") as f:
+            json.dump(stored, f, indent=1)
+        print("texel_samples 2 / 1: %.2fx" % stored["speed"]["ratio"])
+        return
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:   # processes: Dr.Jit in two threads can crash
         rows = [r for rows in pool.map(measure, VALIDATION_MATERIALS) for r in rows]
