@@ -32,6 +32,17 @@ TARGETS = {"envmap_128px_32x64_two_pass": 20.0, "point_light_128px": 5.0}
 MAX_RATIO_TO_ADAM = 1.5
 
 
+def envmap_case(res=128):
+    """The natural-light case: (sky (64, 128, 3), the image of MATERIAL under it
+    (res x res, from the sky's texel centres), a ``dsbrdf`` view at 32x64)."""
+    import numpy as np
+    from mi_dsbrdf.evaluation.experiment import render, texels
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    sky = procedural_sky(64, 128).astype(np.float64)
+    img = render(texels({"type": "dsbrdf", "material": MATERIAL}, res, (64, 128)), sky.reshape(-1, 3))
+    return sky, img, texels({"type": "dsbrdf"}, res, (32, 64))
+
+
 def _case(name, queue):
     import dataclasses
     import resource
@@ -45,7 +56,6 @@ def _case(name, queue):
     from mi_dsbrdf.evaluation.experiment import POINT_DISTANCE, downsample, light_at, render, texels
     from mi_dsbrdf.evaluation.metrics import direction_error_deg, material_errors, scale_invariant_log_error
     from mi_dsbrdf.inference import recover_envmap, recover_light
-    from mi_dsbrdf.inference.latlong import procedural_sky
     from mi_dsbrdf.model import model_file as model_data
     from mi_dsbrdf.model.samples import samples_from_function
 
@@ -63,9 +73,7 @@ def _case(name, queue):
         out["seconds"] = time.perf_counter() - t0
         out["direction_error_deg"] = direction_error_deg(res.light["direction"], pos)
     else:
-        sky = procedural_sky(64, 128).astype(np.float64)
-        img = render(texels(truth, 128, (64, 128)), sky.reshape(-1, 3))
-        ts = texels({"type": "dsbrdf"}, 128, (32, 64))
+        sky, img, ts = envmap_case()
         t0 = time.perf_counter()
         if name == "principled_adam_150it_8spp":
             fit = adam_recover(img, ts.mask, 128, (32, 64), "principled-adam", spp=8, iters=150)

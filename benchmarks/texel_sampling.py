@@ -98,15 +98,12 @@ def speed() -> dict:
     """Seconds of the natural-light inference at texel_samples 1, 2, 1, 2 (one process)."""
     import dataclasses
     import mi_dsbrdf  # noqa: F401
+    from inference_cases import envmap_case
     from mi_dsbrdf.config import PRESETS
-    from mi_dsbrdf.evaluation.experiment import render, texels
     from mi_dsbrdf.inference import recover_envmap
-    from mi_dsbrdf.inference.latlong import procedural_sky
     from mi_dsbrdf.model import model_file as model_data
     model = model_data.shipped_model()
-    sky = procedural_sky(64, 128).astype(np.float64)
-    img = render(texels({"type": "dsbrdf", "material": "gold-metallic-paint"}, 128, (64, 128)), sky.reshape(-1, 3))
-    ts = texels({"type": "dsbrdf"}, 128, (32, 64))
+    _, img, ts = envmap_case()
     out = {"1": [], "2": []}
     for s in (1, 2, 1, 2):
         t0 = time.perf_counter()

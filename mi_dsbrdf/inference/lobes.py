@@ -83,8 +83,8 @@ class LobeSum:
         material: below every pixel's horizon, or blocked. (A test on the transport
         instead, relative to its largest entry, hid most of a map behind one sharp
         lobe's peak.)"""
-        w = self.geometry[2].numpy().reshape(self.n_pixels, self.n_directions)
-        return ~self.texels.texel_sums((w > 0).any(axis=0)[None].astype(np.int64))[0].astype(bool)
+        w = self.geometry[2].numpy().reshape(self.n_pixels, self.n_directions)     # weights >= 0
+        return ~(self.texels.texel_sums(w) > 0).any(axis=0)
 
     def subset(self, rows) -> "LobeSum":
         """The same view restricted to the pixels ``texels.pixels[rows]``."""
