@@ -157,12 +157,15 @@ class TexelSum:
         """Light directions per pixel (pixel-direction pairs per pixel): texels x samples."""
         return 1 if self.light_position is not None else self.directions.shape[0]
 
-    def texel_sums(self, pairs) -> np.ndarray:
-        """(..., texels): sums over each texel's directions of (..., directions) values, whole
-        texels in order (all of them, or a chunk of :meth:`_chunks`)."""
-        if self.per_texel == 1:
-            return pairs
-        return pairs.reshape(pairs.shape[:-1] + (-1, self.per_texel)).sum(axis=-1)
+    def texel_sums(self, pairs, rows) -> np.ndarray:
+        """(rows, texels) float32: sums over each texel's directions of ``pairs``, a
+        Dr.Jit Float of rows x directions values (row-major; whole texels in order:
+        all of them, or a chunk of :meth:`_chunks`). Summed by Dr.Jit before the copy
+        to numpy: numpy's reduction over the short last axis took over half of the
+        inference's time at ``samples`` 2 (``benchmarks/texel_sampling.py --speed``)."""
+        if self.per_texel > 1:
+            pairs = dr.block_sum(pairs, self.per_texel)
+        return pairs.numpy().reshape(rows, -1)
 
     def _pairs(self, t0, t1):
         """Lanes for texels [t0, t1) x all pixels (pixel-major): (si, wo_local, pixel, texel)."""
@@ -214,7 +217,8 @@ class TexelSum:
             for t0, t1 in self._chunks():
                 si, wo, pix, tex = self._pairs(t0, t1)
                 f = self._weights(si, wo, pix, tex, t0, t1)
-                out[:, :, t0 // k:t1 // k] = self.texel_sums(np.array(f).reshape(3, self.n_pixels, t1 - t0))
+                for c in range(3):
+                    out[c, :, t0 // k:t1 // k] = self.texel_sums(f[c], self.n_pixels)
         return out
 
     def pair_geometry(self) -> tuple:
