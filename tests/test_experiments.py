@@ -287,7 +287,8 @@ def test_error_vs_time_report_gives_medians_per_method_and_budget(tmp_path):
 def test_natural_light_against_table_and_what_the_report_set_refuses(tmp_path):
     """--summary --against: both settings' scores against doing nothing, the
     near-Lambertian cases left without a highlight, and the case-by-case count;
-    the report set runs the shipped defaults only (no truth sampling, no subset)."""
+    the report set runs the shipped defaults only (no setting, no subset; its
+    truth may be integrated over each texel, a measure and not a setting)."""
     import natural_light
 
     def write(folder, material, brdf, highlight, truth_highlight):
@@ -307,6 +308,6 @@ def test_natural_light_against_table_and_what_the_report_set_refuses(tmp_path):
     assert rows[2].startswith("| new | 2 | 1.25×, 1 |") and rows[2].endswith("| 1 of 1 |")
     assert rows[3].startswith("| ref | 2 | 0.85×, 2 |") and rows[3].endswith("| 0 of 1 |")
     assert "brdf_eq20_paper 1 / 1, illumination_error 0 / 0, relight 0 / 0" in table
-    for bad in (["--truth-samples", "4"], ["--materials", "pvc"], ["--config", "texel_samples=2"]):
+    for bad in (["--materials", "pvc"], ["--config", "texel_samples=2"], ["--gmm", "full:2:0.01"]):
         with pytest.raises(SystemExit, match="report set runs the shipped defaults"):
             natural_light.main(["--set", "report"] + bad)
