@@ -57,15 +57,18 @@ class Config:
         and Mahalanobis distance to each component only
         (:class:`~mi_dsbrdf.model.priors.GaussianMixture`). 1 is the validation
         choice (``benchmarks/results/natural_light/gmm_choice.json``): 0.5 and 0
-        gave near-Lambertian materials fewer highlights but relit worse
+        gave near-Lambertian materials fewer highlights but relit worse (at
+        ``texel_samples`` 1 and 2)
     map_levels : the start runs on ``map_size`` halved ``map_levels - 1`` times,
         the passes on ``map_size`` (:func:`mi_dsbrdf.inference.envmap.map_sizes`)
     texel_samples : directions per texel side the forward model lights each
         texel from (s x s; :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is
         the texel centres, whose image of a lobe narrower than the texel spacing
         is 0.1-0.4 off in mean |log| on the sharpest validation materials at 32x64
-        (``benchmarks/texel_sampling.py``); s costs s^2 times the pair evaluations
-        (the pixel budgets below count texels, so the same pixels are used)
+        (``benchmarks/texel_sampling.py``). 2 is the validation choice
+        (``benchmarks/results/natural_light/gmm_choice.json``), at about 1.5x the
+        time of 1 (s^2 times the pair evaluations, summed in the kernels; the
+        pixel budgets below count texels, so the same pixels are used)
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
         step: it fits 16 variables, so an evenly spread subset of the pixels does
         (the Jacobian's cost is proportional to pixels x texels)
@@ -89,7 +92,7 @@ class Config:
     gradient_eps: float = 0.1
     gmm_volume: float = 1.0
     map_levels: int = 2
-    texel_samples: int = 1
+    texel_samples: int = 2
     reflectance_pairs: int = 500_000
     map_pairs: int = 1 << 23
 
