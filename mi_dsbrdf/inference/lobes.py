@@ -155,7 +155,7 @@ class LobeSum:
         L, s = unit_scaled(illumination)
         sums = np.empty((R, 1 + 2 * N_CONTROL, 3, self.n_pixels))
         for p0, p1, directions in self._rows(JACOBIAN_CHUNK):
-            cols = 0.0
+            cols = None
             for lc, td, w in directions:            # a texel's directions, summed in the kernel
                 basis = spline_basis(td, material.knots)
                 kappa, gamma = lobe_curves(td, lk, lg, material.knots)
@@ -168,7 +168,7 @@ class LobeSum:
                     e = (lobe + 1.0) * w            # e^u * weight (the product's order keeps float32 finite)
                     d_kappa, d_gamma = e * u, (e * k) * (x * ex)
                     terms += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
-                cols = terms if isinstance(cols, float) else [a + b for a, b in zip(cols, terms)]
+                cols = terms if cols is None else [a + b for a, b in zip(cols, terms)]
             dr.eval(*cols)
             A = [c.numpy().reshape(p1 - p0, self.n_texels) for c in cols]
             if self.n_texels == 1:                  # one light: the sum over texels is a product
