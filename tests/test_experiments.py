@@ -311,3 +311,26 @@ def test_natural_light_against_table_and_what_the_report_set_refuses(tmp_path):
     for bad in (["--materials", "pvc"], ["--config", "texel_samples=2"], ["--gmm", "full:2:0.01"]):
         with pytest.raises(SystemExit, match="report set runs the shipped defaults"):
             natural_light.main(["--set", "report"] + bad)
+
+
+def test_natural_light_choose_never_picks_an_overruled_setting(tmp_path):
+    """A setting holding a value of natural_light.OVERRULED is scored and listed
+    but not chosen, even with the lowest score; the next best is."""
+    import natural_light
+
+    def write(folder, ratio):
+        os.makedirs(tmp_path / folder, exist_ok=True)
+        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
+        r = {"case": {"material": "felt", "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
+             "brdf_eq20_paper": ratio, "illumination_error": ratio, "relight": {"pisa": ratio}}
+        with open(tmp_path / folder / "felt.json", "w") as f:
+            json.dump(r, f)
+    (key, (value, _)), = natural_light.OVERRULED.items()
+    bad = natural_light.setting_name({key: value})
+    write(bad, 0.3)
+    write("w_gmm100", 0.5)
+    write("w_gmm1000", 0.7)
+    choice = natural_light.choose(str(tmp_path))
+    assert choice["best"] == "w_gmm100" and choice["best_config"] == {"w_gmm": 100}
+    assert set(choice["overruled"]) == {bad} and bad in choice["settings"]
+    assert "%s (overruled)" % bad in natural_light.choice_table(choice)
