@@ -37,7 +37,7 @@ off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
         --materials violet-acrylic nickel   # truth from the probe integrated over each texel
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
     .venv/bin/python benchmarks/natural_light.py --set report --summary      # tables from the results
-    .venv/bin/python benchmarks/natural_light.py --set report --truth-samples 4   # the truth integrated, ~30 min
+    .venv/bin/python benchmarks/natural_light.py --set report --truth-samples 4   # the truth integrated, ~50 min
     .venv/bin/python benchmarks/natural_light.py --set report --report       # -> docs/natural_light.{md,png}
 """
 from __future__ import annotations
@@ -318,7 +318,8 @@ def choose(root=SWEEP, n_cases=None, command="--choose") -> dict:
     complete = {k: v for k, v in scores.items() if v["cases"] == n_cases}
     if not complete:
         raise SystemExit("no complete validation setting under %s" % root)
-    allowed = [k for k in complete if overruled(k) is None]
+    barred = {k: why for k in complete if (why := overruled(k)) is not None}
+    allowed = [k for k in complete if k not in barred]
     if not allowed:
         raise SystemExit("every complete validation setting under %s is overruled" % root)
     best = min(allowed, key=lambda k: complete[k]["score"])
@@ -330,7 +331,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose") -> dict:
             "cases": n_cases, "best": best, "best_config": config,
             "best_gmm": GMM if gmm is None else gmm,     # defaults: the build's structure
             "settings": complete,
-            "overruled": {k: overruled(k) for k in complete if overruled(k) is not None},
+            "overruled": barred,
             # settings run on fewer cases (before the validation set grew) are not scored
             "incomplete": {k: v["cases"] for k, v in scores.items() if k not in complete}}
 
