@@ -63,11 +63,22 @@ OUT = os.path.join(ROOT, "benchmarks", "results", "natural_light")
 #: GMM's structure on all twelve under the first two; the quarry joined them when
 #: the first two turned out to hold no small bright source (the brightest texel
 #: 61x and 5x the median, against 40000x for grace and 9500x for the quarry's sun),
-#: which the report set has and the tuned settings failed on (``gmm_choice.json``)
+#: which the report set has and the tuned settings failed on (``gmm_choice.json``).
+#: The last eight joined in the seventh session, drawn at random (numpy
+#: ``default_rng(15)``, :data:`GROWN_VALIDATION`) from the library materials in neither
+#: set, six from the shipped GMM's cluster 2 (paints, rubbers: 55 of the library's 100,
+#: 4 of the first twelve) and two from cluster 3 (31 of 100, 4 of twelve), so that the
+#: validation set holds the clusters in the library's proportions: the texel_samples 2
+#: trial had won on a validation set with few mildly glossy materials and lost on the
+#: report set, which has more
 VALIDATION_MATERIALS = ["violet-acrylic", "silver-metallic-paint", "blue-fabric", "yellow-plastic",
                         "polyurethane-foam", "nickel",
                         "specular-blue-phenolic", "dark-red-paint", "white-fabric", "gray-plastic",
-                        "neoprene-rubber", "brass"]
+                        "neoprene-rubber", "brass",
+                        "color-changing-paint2", "purple-paint", "special-walnut-224", "gold-metallic-paint2",
+                        "teflon", "pink-plastic", "blue-metallic-paint2", "yellow-phenolic"]
+#: how the last eight validation materials were drawn: (seed, {cluster: count})
+GROWN_VALIDATION = (15, {2: 6, 3: 2})
 VALIDATION_PROBES = ["probulator/wells.hdr", "polyhaven/pedestrian_overpass_1k.hdr", "polyhaven/quarry_01_1k.hdr"]
 #: report: 12 other materials, by GMM cluster of the shipped model (0: foams and
 #: fabrics; 1: metals, acrylics, phenolics; 2: paints, rubbers, fabrics; 3: the
@@ -203,7 +214,7 @@ def summary(folder) -> str:
     flat = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN and
             r["case"]["method"] == "dsbrdf"]
     if flat:
-        ok = sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in flat)
+        ok = near_lambertian_clean(flat)[0]
         md += ["", "Near-Lambertian materials (measured peak / off-peak < %.1f, "
                ":func:`~mi_dsbrdf.evaluation.metrics.highlight_ratio`): no highlight, i.e. a recovered ratio "
                "below %.1f× the measured one, in %d of %d cases (the mean material's median ratio: %.1f)." % (
@@ -233,21 +244,34 @@ GMM_CHOICE = os.path.join(OUT, "gmm_choice.json")
 #: 0.1, renamed so that a run of today's defaults does not resume into it)
 SWEEP = os.path.join(OUT, "validation_sweep")
 SWEEP_SHIPPED = os.path.join(OUT, "validation", "defaults-eps0.01")
-#: Config values the rule picked on validation and the report set then contradicted
-#: (value, why): the settings that hold them are scored and listed, never chosen. The
-#: report set decided this once, against the rule; the README says so (Natural light,
-#: "The forward model's texel sampling").
-OVERRULED = {"texel_samples": (2, "chosen on validation (0.565 against 0.623 at texel centres), then worse on "
-                                  "the report set (BRDF better than the mean material in 51 of 72 cases against "
-                                  "59, relit in 61 against 65): spurious sharp highlights on mildly glossy "
-                                  "materials, which the validation set has few of")}
+#: settings the rule picked on validation and the report set then contradicted
+#: (setting name: why): they are scored and listed, never chosen. The report set
+#: decided this once, against the rule; the README says so (Natural light, "The
+#: forward model's texel sampling"). Only the setting the report set ran is barred:
+#: texel_samples 2 with other GMM settings was not run there
+OVERRULED = {"texel_samples2": "chosen on validation (0.565 against 0.623 at texel centres), then worse on the "
+                               "report set (BRDF better than the mean material in 51 of 72 cases against 59, "
+                               "relit in 61 against 65): spurious sharp highlights on mildly glossy materials, "
+                               "which the validation set had few of"}
+#: the validation folder of the shipped code, the reference of the choice's wins guard
+#: (:func:`choose`); rerun it when the shipped code's results may have moved
+SHIPPED_SETTING = "texel_samples1"
 
 
 def overruled(name) -> str | None:
     """Why the setting ``name`` (a :func:`setting_name`) may not be chosen, or None."""
-    config = parse_setting(name)[1]
-    why = [w for k, (v, w) in OVERRULED.items() if config.get(k) == v]
+    parsed = parse_setting(name)
+    why = [w for bad, w in OVERRULED.items() if parse_setting(bad) == parsed]
     return why[0] if why else None
+
+
+def near_lambertian_clean(rows) -> tuple:
+    """(cases recovered without a highlight, near-Lambertian cases) of this tool's
+    results ``rows``: measured peak / off-peak below NEAR_LAMBERTIAN, recovered below
+    HIGHLIGHT_LIMIT times the measured one."""
+    near = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN
+            and r["case"].get("method", "dsbrdf") == "dsbrdf"]
+    return sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in near), len(near)
 
 
 def setting_scores(folder) -> dict:
@@ -260,6 +284,7 @@ def setting_scores(folder) -> dict:
         wins, median = against_nothing(rows, key)
         out[key] = {"median_ratio": median, "wins": wins}
     out["score"] = float(np.mean([out[k]["median_ratio"] for k in CHOICE_MEASURES]))
+    out["near_lambertian_clean"], out["near_lambertian"] = near_lambertian_clean(rows)
     return out
 
 
@@ -286,12 +311,11 @@ def against_table(folder, reference) -> str:
     lines = ["| setting | cases | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
              + " | score | near-Lambertian without a highlight |", "|---|---|" + "---|" * (len(CHOICE_MEASURES) + 2)]
     for d in (folder, reference):
-        v, rows = setting_scores(d), load_results(d)
-        near = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN]
-        clean = sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in near)
+        v = setting_scores(d)
         lines.append("| %s | %d | %s | %.3f | %d of %d |" % (
             os.path.basename(d), v["cases"], " | ".join("%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"])
-                                                          for k in CHOICE_MEASURES), v["score"], clean, len(near)))
+                                                          for k in CHOICE_MEASURES), v["score"],
+            v["near_lambertian_clean"], v["near_lambertian"]))
     lines.append("\nCase by case, %s lower / higher than %s: %s" % (
         os.path.basename(folder), os.path.basename(reference),
         ", ".join("%s %d / %d" % (k, *pairs[k]) for k in CHOICE_MEASURES)))
@@ -308,30 +332,57 @@ def parse_setting(name) -> tuple:
     return gmm, parse_config(parts)
 
 
-def choose(root=SWEEP, n_cases=None, command="--choose") -> dict:
+def choose(root=SWEEP, n_cases=None, command="--choose", reference=None) -> dict:
     """The validation setting with the lowest score (:func:`setting_scores`) among
     the complete ones (``n_cases`` run; default: as many as the setting with the
-    most), and every setting's scores."""
+    most), and every setting's scores.
+
+    Not chosen: the OVERRULED settings, and, given the folder name ``reference``
+    of the shipped code, every setting with fewer wins (cases better than doing
+    nothing) than it on any of CHOICE_MEASURES or fewer near-Lambertian cases
+    without a highlight (the wins guard, declared in the seventh session before the
+    runs it first judged: the median-ratio score let texel_samples 2 win on large
+    gains in a third of the cases over losses in a sixth, and the issue's targets
+    count wins)."""
     scores = {os.path.basename(d): setting_scores(d) for d in sorted(glob.glob(os.path.join(root, "*")))
               if os.path.isdir(d)}
     n_cases = n_cases or max([v["cases"] for v in scores.values()] + [1])
     complete = {k: v for k, v in scores.items() if v["cases"] == n_cases}
     if not complete:
         raise SystemExit("no complete validation setting under %s" % root)
+    if reference is not None and reference not in complete:
+        raise SystemExit("the shipped code's setting %s has not run on all %d validation cases under %s"
+                         % (reference, n_cases, root))
     barred = {k: why for k in complete if (why := overruled(k)) is not None}
-    allowed = [k for k in complete if k not in barred]
+    short = {}
+    if reference is not None:
+        ref = complete[reference]
+        for k, v in complete.items():
+            fewer = ["%s wins %d < %d" % (m, v[m]["wins"], ref[m]["wins"]) for m in CHOICE_MEASURES
+                     if v[m]["wins"] < ref[m]["wins"]]
+            if v["near_lambertian_clean"] < ref["near_lambertian_clean"]:
+                fewer.append("near-Lambertian without a highlight %d < %d" % (v["near_lambertian_clean"],
+                                                                              ref["near_lambertian_clean"]))
+            if fewer:
+                short[k] = "; ".join(fewer)
+    allowed = [k for k in complete if k not in barred and k not in short]
     if not allowed:
         raise SystemExit("every complete validation setting under %s is overruled" % root)
     best = min(allowed, key=lambda k: complete[k]["score"])
     for name, v in complete.items():
         v["against_best"] = paired_against(os.path.join(root, name), os.path.join(root, best))
     gmm, config = parse_setting(best)
+    rule = "lowest mean over the measures of the median ratio to doing nothing"
+    if reference is not None:
+        rule += (", among the settings with no fewer wins on each measure and no fewer near-Lambertian cases "
+                 "without a highlight than the shipped code (%s)" % reference)
     return {"command": "python benchmarks/natural_light.py " + command, "measures": list(CHOICE_MEASURES),
-            "rule": "lowest mean over the measures of the median ratio to doing nothing",
-            "cases": n_cases, "best": best, "best_config": config,
+            "rule": rule, "cases": n_cases, "best": best, "best_config": config,
             "best_gmm": GMM if gmm is None else gmm,     # defaults: the build's structure
+            "reference": reference,
             "settings": complete,
             "overruled": barred,
+            "fewer_wins": short,
             # settings run on fewer cases (before the validation set grew) are not scored
             "incomplete": {k: v["cases"] for k, v in scores.items() if k not in complete}}
 
@@ -348,7 +399,8 @@ def choice_table(choice) -> str:
              "|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 2)]
     for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["score"]):
         paired = v.get("against_best")
-        label = name + (" (overruled)" if name in choice.get("overruled", {}) else "")
+        label = name + (" (overruled)" if name in choice.get("overruled", {}) else
+                        " (fewer wins)" if name in choice.get("fewer_wins", {}) else "")
         lines.append("| %s | %d | %.0f | %s | %.3f | %s |" % (label, v["cases"], v["seconds_median"], " | ".join(
             "%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"],
             "–" if paired is None or name == choice["best"] else
@@ -440,7 +492,7 @@ def main(argv=None):
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
     if args.choose_gmm:
-        choice = choose(os.path.join(OUT, "validation"), command="--choose-gmm")
+        choice = choose(os.path.join(OUT, "validation"), command="--choose-gmm", reference=SHIPPED_SETTING)
         write_choice(choice, GMM_CHOICE)
         print(choice_table(choice))
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(GMM_CHOICE, ROOT)))

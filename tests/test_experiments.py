@@ -325,12 +325,43 @@ def test_natural_light_choose_never_picks_an_overruled_setting(tmp_path):
              "brdf_eq20_paper": ratio, "illumination_error": ratio, "relight": {"pisa": ratio}}
         with open(tmp_path / folder / "felt.json", "w") as f:
             json.dump(r, f)
-    (key, (value, _)), = natural_light.OVERRULED.items()
-    bad = natural_light.setting_name({key: value})
+    bad, = natural_light.OVERRULED
+    allowed = bad + "-w_gmm100"                      # the same value beside another setting: not barred
     write(bad, 0.3)
-    write("w_gmm100", 0.5)
+    write(allowed, 0.4)
     write("w_gmm1000", 0.7)
     choice = natural_light.choose(str(tmp_path))
-    assert choice["best"] == "w_gmm100" and choice["best_config"] == {"w_gmm": 100}
+    assert choice["best"] == allowed and choice["best_config"] == dict(natural_light.parse_setting(bad)[1],
+                                                                       w_gmm=100)
     assert set(choice["overruled"]) == {bad} and bad in choice["settings"]
     assert "%s (overruled)" % bad in natural_light.choice_table(choice)
+
+
+def test_natural_light_choose_keeps_the_shipped_code_over_a_setting_with_fewer_wins(tmp_path):
+    """The wins guard: a setting with a lower score but fewer cases better than
+    doing nothing, or fewer near-Lambertian cases without a highlight, than the
+    shipped code (``reference``) is scored, listed and not chosen."""
+    import natural_light
+
+    def write(folder, case, ratio, highlight=1.0):
+        os.makedirs(tmp_path / folder, exist_ok=True)
+        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
+        r = {"case": {"material": "m%d" % case, "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
+             "brdf_eq20_paper": ratio, "illumination_error": ratio, "relight": {"pisa": ratio},
+             "truth_highlight_ratio": 1.2, "highlight_ratio": highlight}
+        with open(tmp_path / folder / ("m%d.json" % case), "w") as f:
+            json.dump(r, f)
+    for case in range(3):
+        write("defaults", case, 0.8)                                  # 3 wins, median 0.8
+        write("w_gmm100", case, [0.1, 0.2, 1.5][case])                # median 0.2, but 2 wins
+        write("w_gmm10", case, 0.7, highlight=[1.0, 1.0, 5.0][case])  # 3 wins, one highlight more
+        write("w_gmm1000", case, 0.75)                                # 3 wins, no highlight: chosen
+    choice = natural_light.choose(str(tmp_path), reference="defaults")
+    assert choice["best"] == "w_gmm1000"
+    assert set(choice["fewer_wins"]) == {"w_gmm100", "w_gmm10"}
+    assert "brdf_eq20_paper wins 2 < 3" in choice["fewer_wins"]["w_gmm100"]
+    assert "near-Lambertian without a highlight 2 < 3" in choice["fewer_wins"]["w_gmm10"]
+    assert "w_gmm100 (fewer wins)" in natural_light.choice_table(choice)
+    assert natural_light.choose(str(tmp_path))["best"] == "w_gmm100"          # no reference: the score alone
+    with pytest.raises(SystemExit, match="has not run"):
+        natural_light.choose(str(tmp_path), reference="w_gmm5")
