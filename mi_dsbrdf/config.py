@@ -70,6 +70,11 @@ class Config:
         1 stays (``natural_light.OVERRULED``); 2 costs about 1.5x the time (s^2
         times the pair evaluations, summed in the kernels; the pixel budgets
         below count texels, so the same pixels are used)
+    grey_texel_samples : ``texel_samples`` of the start and the grey pass, None
+        (the default) for the same as the colour pass: with 1 the start and the
+        grey pass run at texel centres and only the colour pass at
+        ``texel_samples``, which then refines the texel-centre answer (a trial:
+        README, Natural light)
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
         step: it fits 16 variables, so an evenly spread subset of the pixels does
         (the Jacobian's cost is proportional to pixels x texels)
@@ -94,6 +99,7 @@ class Config:
     gmm_volume: float = 1.0
     map_levels: int = 2
     texel_samples: int = 1
+    grey_texel_samples: int | None = None
     reflectance_pairs: int = 500_000
     map_pairs: int = 1 << 23
 
@@ -111,6 +117,9 @@ class Config:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
+        g = self.grey_texel_samples
+        if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 1):
+            raise ConfigError("grey_texel_samples must be None or an integer >= 1, got %r" % (g,))
         if not (isinstance(self.gmm_volume, (int, float)) and 0 <= self.gmm_volume <= 1):
             raise ConfigError("gmm_volume must be a number from 0 to 1, got %r" % (self.gmm_volume,))
         for name in ("tol", "likelihood_scale", "gradient_eps"):

@@ -1,11 +1,12 @@
 """End-to-end inference on small synthetic cases (data made by the deterministic forward model)."""
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.errors import InputError
+from mi_dsbrdf.errors import ConfigError, InputError
 from mi_dsbrdf.inference import recover_envmap, recover_light
 from mi_dsbrdf.inference.objective import direction_from_angles
 from mi_dsbrdf.inference.reflectance import reflectance_starts
@@ -167,3 +168,24 @@ def test_a_grey_object_comes_back_grey():
     res = recover_light(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(),
                         Config(max_rounds=2, block_iters=20))
     np.testing.assert_allclose(res.chromaticity, 1 / 3, atol=0.02)
+
+
+def test_grey_texel_samples_runs_the_start_and_grey_pass_at_texel_centres():
+    """``Config.grey_texel_samples`` 1 with ``texel_samples`` 2: the start and the
+    grey pass are those of a texel-centre run, number for number; the colour pass
+    lights each texel from 2 x 2 directions and ends elsewhere."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10)
+    runs = [recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, cfg, starts=[np.zeros(model.basis.n_bases)])
+            for cfg in (dataclasses.replace(base, texel_samples=1),
+                        dataclasses.replace(base, texel_samples=2, grey_texel_samples=1))]
+    value = [{r["pass"]: r["neg_log_posterior"] for r in res.log} for res in runs]
+    assert value[0]["start"] == value[1]["start"] and value[0]["grey"] == value[1]["grey"]
+    assert value[0]["colour"] != value[1]["colour"] and np.isfinite(value[1]["colour"])
+    with pytest.raises(ConfigError, match="grey_texel_samples"):
+        Config(grey_texel_samples=0)

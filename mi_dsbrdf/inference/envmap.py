@@ -82,13 +82,16 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # the coarse start has fewer texels, but it only chooses among the starts
     max_pixels = cfg.map_pairs // (cfg.map_size[0] * cfg.map_size[1])
 
-    def posterior(size):
-        if size not in posteriors:
-            posteriors[size] = Posterior(texels.with_map_size(size, cfg.texel_samples), observed, mask, model, cfg,
-                                         max_pixels=max_pixels)
-        return posteriors[size]
+    def posterior(size, pass_name):
+        samples = cfg.texel_samples
+        if pass_name in ("start", "grey") and cfg.grey_texel_samples is not None:
+            samples = cfg.grey_texel_samples
+        if (size, samples) not in posteriors:
+            posteriors[size, samples] = Posterior(texels.with_map_size(size, samples), observed, mask, model, cfg,
+                                                  max_pixels=max_pixels)
+        return posteriors[size, samples]
 
-    post = posterior(sizes[0])
+    post = posterior(sizes[0], "start")
     logits0 = image_chroma_logits(post.observed, post.keep, post.R)
     rows = []
     t0 = time.perf_counter()
@@ -125,7 +128,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             best = (value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK))
     _, psi, logits, log_map = best
     for pass_name, size in zip(passes, sizes[1:]):
-        post = posterior(size)
+        post = posterior(size, pass_name)
         H, W = size
         log_map = resample(log_map, size)
         T = post.transport(psi, logits)
