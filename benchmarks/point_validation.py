@@ -9,7 +9,7 @@ beside the model's mean material (psi = 0).
 
     .venv/bin/python benchmarks/point_validation.py                       # 24 cases, ~3 min on 2 cores
     .venv/bin/python benchmarks/point_validation.py --gmm full:2:0.01 --w-gmm 100
-    .venv/bin/python benchmarks/point_validation.py --config gmm_volume=0.5
+    .venv/bin/python benchmarks/point_validation.py --config light_gmm_volume=0   # the GMM without its volume terms
 
 Adds its setting to ``benchmarks/results/point_validation.json`` (``settings``,
 named like ``natural_light.setting_name``).
@@ -49,7 +49,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--gmm", default=None, help="the leave-one-out models' GMM structure (default the build's)")
     ap.add_argument("--w-gmm", type=float, default=None, help="the GMM prior's weight (default Config's)")
-    ap.add_argument("--config", nargs="*", help="other Config overrides, name=value (e.g. gmm_volume=0.5)")
+    ap.add_argument("--config", nargs="*", help="other Config overrides, name=value (e.g. light_gmm_volume=0)")
     args = ap.parse_args(argv)
     weights = parse_config(args.config)
     if args.w_gmm is not None:

@@ -55,26 +55,37 @@ class Config:
     gmm_volume : the fraction (0 to 1) of its components' volume terms the GMM
         prior keeps: 1 is the normalised density of Eq. 6, 0 ranks psi by weight
         and Mahalanobis distance to each component only
-        (:class:`~mi_dsbrdf.model.priors.GaussianMixture`). 1 is the validation
-        choice (``benchmarks/results/natural_light/gmm_choice.json``): 0.5 and 0
-        gave near-Lambertian materials fewer highlights but relit worse (at
-        ``texel_samples`` 1 and 2)
+        (:class:`~mi_dsbrdf.model.priors.GaussianMixture`). 0 is the validation
+        choice (``benchmarks/results/natural_light/gmm_choice.json``, with the
+        texel sampling below): the volume terms favour the shipped GMM's narrow
+        components (log det 8 and -12: the bulk of the library, and its metals,
+        acrylics and paints) over its broad ones (25: fabrics, felt, foam) by
+        8-18 nats, and near-Lambertian materials took a highlight more often
+        with them. Under an illumination map only; see ``light_gmm_volume``
+    light_gmm_volume : ``gmm_volume`` under a point or directional light. 1 is
+        the validation choice there (``benchmarks/point_validation.py``, the
+        validation materials at 20 and 60 degrees, side by side): at 0 the BRDF
+        beat the mean material in 32 of 40 cases against 34, median ratio 0.75
+        against 0.61, and was lower case by case in 12 of 40. A point light sees
+        a narrow band of theta_d, and the prior carries more of the answer there
     map_levels : the start runs on ``map_size`` halved ``map_levels - 1`` times,
         the passes on ``map_size`` (:func:`mi_dsbrdf.inference.envmap.map_sizes`)
     texel_samples : directions per texel side the forward model lights each
-        texel from (s x s; :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is
-        the texel centres, whose image of a lobe narrower than the texel spacing
-        is 0.1-0.4 off in mean |log| on the sharpest validation materials at 32x64
-        (``benchmarks/texel_sampling.py``). 2 won on validation but lost on the
-        report set (mildly glossy materials take a spurious sharp highlight), so
-        1 stays (``natural_light.OVERRULED``); 2 costs about 1.5x the time (s^2
-        times the pair evaluations, summed in the kernels; the pixel budgets
-        below count texels, so the same pixels are used)
+        texel from in the colour pass (s x s;
+        :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,
+        whose image of a lobe narrower than the texel spacing is 0.1-0.4 off in
+        mean |log| on the sharpest validation materials at 32x64
+        (``benchmarks/texel_sampling.py``). 2 costs s^2 times the pair
+        evaluations, summed in the kernels (the pixel budgets below count
+        texels, so the same pixels are used)
     grey_texel_samples : ``texel_samples`` of the start and the grey pass, None
-        (the default) for the same as the colour pass: with 1 the start and the
-        grey pass run at texel centres and only the colour pass at
-        ``texel_samples``, which then refines the texel-centre answer (a trial:
-        README, Natural light)
+        for the same as the colour pass. The validation choice
+        (``gmm_choice.json``) is 1 here and 2 in the colour pass: the start and
+        the grey pass settle the lobes at texel centres, the colour pass refines
+        that answer with the finer forward model, at about the time of 1
+        throughout. 2 throughout won on the first validation set but lost on
+        the report set (mildly glossy materials took a spurious sharp
+        highlight; ``natural_light.OVERRULED``)
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
         step: it fits 16 variables, so an evenly spread subset of the pixels does
         (the Jacobian's cost is proportional to pixels x texels)
@@ -96,10 +107,11 @@ class Config:
     w_entropy: float = 1.0
     w_gradient: float = 30000.0
     gradient_eps: float = 0.1
-    gmm_volume: float = 1.0
+    gmm_volume: float = 0.0
+    light_gmm_volume: float = 1.0
     map_levels: int = 2
-    texel_samples: int = 1
-    grey_texel_samples: int | None = None
+    texel_samples: int = 2
+    grey_texel_samples: int | None = 1
     reflectance_pairs: int = 500_000
     map_pairs: int = 1 << 23
 
@@ -120,8 +132,10 @@ class Config:
         g = self.grey_texel_samples
         if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 1):
             raise ConfigError("grey_texel_samples must be None or an integer >= 1, got %r" % (g,))
-        if not (isinstance(self.gmm_volume, (int, float)) and 0 <= self.gmm_volume <= 1):
-            raise ConfigError("gmm_volume must be a number from 0 to 1, got %r" % (self.gmm_volume,))
+        for name in ("gmm_volume", "light_gmm_volume"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1):
+                raise ConfigError("%s must be a number from 0 to 1, got %r" % (name, value))
         for name in ("tol", "likelihood_scale", "gradient_eps"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):

@@ -65,6 +65,23 @@ def test_known_directional_light_recovers_the_dsbrdf(observed):
     assert np.median(err) < 0.05, np.median(err)              # BRDF at the observed angles within 5 %
 
 
+def test_a_light_takes_the_gmm_volume_of_lights_not_the_maps(observed):
+    """Under a light the GMM prior keeps ``Config.light_gmm_volume`` of its volume
+    terms (chosen under point lights), not ``gmm_volume`` (chosen under maps)."""
+    s = sphere({"type": "dsbrdf"})
+    ts = TexelSum(s, s.shapes()[0], (1, 1))
+    model = model_data.shipped_model()
+    base = Config(max_rounds=1, block_iters=8)
+    psi = [recover_light(ts, observed, ts.mask, model, dataclasses.replace(base, **kw),
+                         known_light=(LIGHT, 3.0)).psi
+           for kw in ({"gmm_volume": 0.0, "light_gmm_volume": 1.0}, {"gmm_volume": 1.0, "light_gmm_volume": 1.0},
+                      {"gmm_volume": 1.0, "light_gmm_volume": 0.0})]
+    np.testing.assert_array_equal(psi[0], psi[1])
+    assert not np.allclose(psi[1], psi[2])
+    with pytest.raises(ConfigError, match="light_gmm_volume"):
+        Config(light_gmm_volume=2.0)
+
+
 def test_unknown_directional_light_within_a_degree(observed):
     s = sphere({"type": "dsbrdf"})
     ts = TexelSum(s, s.shapes()[0], (1, 1))

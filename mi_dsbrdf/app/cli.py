@@ -116,9 +116,9 @@ def _config_arguments(p, preset):
     p.add_argument("--rounds", type=int, default=None, help="rounds of alternating blocks per pass")
     p.add_argument("--iters", type=int, default=None, help="Levenberg-Marquardt iterations per reflectance block")
     p.add_argument("--texel-samples", type=int, default=None, metavar="S",
-                   help="light each map texel from S x S directions (default 1, the texel centres: sharp "
-                        "highlights come back too broad; 2 recovers them at 1.5x the time but can give mildly glossy "
-                        "materials a spurious highlight; see the README, Natural light)")
+                   help="light each map texel from S x S directions in the colour pass (default 2; the start "
+                        "and the grey pass run at the texel centres; 1: centres throughout, sharp highlights come "
+                        "back too broad; see the README, Natural light)")
 
 
 def main(argv=None):

@@ -116,7 +116,7 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         (1.00, 0.00, 0.00))
     """
     cfg = config or Config()
-    post = Posterior(texels, observed, mask, model, cfg, point=point)
+    post = Posterior(texels, observed, mask, model, cfg, point=point, gmm_volume=cfg.light_gmm_volume)
     logits = image_chroma_logits(post.observed, post.keep, post.R)
     psi = np.zeros(post.k)
     t0 = time.perf_counter()

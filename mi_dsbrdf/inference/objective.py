@@ -85,10 +85,15 @@ class Posterior:
         directional light or a map
     max_pixels : the most pixels the posterior works on (default
         ``config.map_pairs`` / texels; see :class:`~mi_dsbrdf.config.Config`)
+    gmm_volume : the fraction of the GMM's volume terms the prior keeps (default
+        ``config.gmm_volume``, the choice under a map; a light's inference passes
+        ``config.light_gmm_volume``)
     """
 
-    def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None, max_pixels=None):
+    def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None, max_pixels=None,
+                 gmm_volume=None):
         self.model, self.cfg, self.point = model, config, point
+        self.gmm_volume = config.gmm_volume if gmm_volume is None else gmm_volume
         obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
         self.offset = LOG_OFFSET * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
@@ -169,9 +174,9 @@ class Posterior:
 
     def gmm_prior(self, psi) -> tuple:
         """(value, gradient, Gauss-Newton Hessian) of the weighted GMM prior (Eq. 6,
-        with or without its components' volume terms: ``Config.gmm_volume``).
+        with or without its components' volume terms: ``gmm_volume``).
         The model must have a GMM."""
-        gmm, w, vol = self.model.gmm, self.w["gmm"], self.cfg.gmm_volume
+        gmm, w, vol = self.model.gmm, self.w["gmm"], self.gmm_volume
         return w * gmm.nll(psi, vol), w * gmm.grad(psi, vol), w * gmm.dominant_precision(psi, vol)
 
     def curve_penalty(self, psi) -> tuple:
