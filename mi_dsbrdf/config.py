@@ -82,8 +82,10 @@ class Config:
         for the same as the colour pass. The validation choice
         (``gmm_choice.json``) is 1 here and 2 in the colour pass: the start and
         the grey pass settle the lobes at texel centres, the colour pass refines
-        that answer with the finer forward model, at about the time of 1
-        throughout. 2 throughout won on the first validation set but lost on
+        that answer with the finer forward model, at 1.16x the time of 1
+        throughout (2 throughout: 1.29x; ``benchmarks/texel_sampling.py
+        --speed``, 128x128, side by side). 2 throughout won on the
+        first validation set but lost on
         the report set (mildly glossy materials took a spurious sharp
         highlight; ``natural_light.OVERRULED``)
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
