@@ -84,10 +84,13 @@ class Config:
         the grey pass settle the lobes at texel centres, the colour pass refines
         that answer with the finer forward model, at 1.16x the time of 1
         throughout (2 throughout: 1.29x; ``benchmarks/texel_sampling.py
-        --speed``, 128x128, side by side). 2 throughout won on the
-        first validation set but lost on
-        the report set (mildly glossy materials took a spurious sharp
-        highlight; ``natural_light.OVERRULED``)
+        --speed``, 128x128, side by side). Against a validation truth
+        integrated over each texel (not the texel centres it was chosen on,
+        which favour 2 x 2 by construction) it is level with the code before
+        (1 throughout, ``gmm_volume`` 1; README, Natural light). 2 throughout
+        won on the first validation set but lost on the report set (mildly
+        glossy materials took a spurious sharp highlight;
+        ``natural_light.OVERRULED``)
     reflectance_pairs : pixel-texel pairs the reflectance block differentiates per
         step: it fits 16 variables, so an evenly spread subset of the pixels does
         (the Jacobian's cost is proportional to pixels x texels)
