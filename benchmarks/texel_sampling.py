@@ -21,7 +21,7 @@ measure (Eq. 19), whose scale b is ``Config.likelihood_scale`` (0.05).
 Validation materials and probes only (``natural_light.py``).
 
     .venv/bin/python benchmarks/texel_sampling.py [--workers 2]   # ~12 min on one worker, 5 GB each
-    .venv/bin/python benchmarks/texel_sampling.py --speed   # inference time at centres, shipped, 2 throughout, side by side, ~6 min
+    .venv/bin/python benchmarks/texel_sampling.py --speed   # inference time at centres, shipped, 2 throughout, side by side, ~2 min
 
 ``--speed`` times ``inference_cases.py``'s natural-light case (a 128x128 sphere,
 32x64 map, two passes) at the texel centres throughout, at the shipped sampling
