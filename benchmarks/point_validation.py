@@ -7,7 +7,7 @@ under a point light at two angles, with a GMM weight and the leave-one-out
 models' GMM structure (default: the shipped ones), and prints Eq. 20 (paper)
 beside the model's mean material (psi = 0).
 
-    .venv/bin/python benchmarks/point_validation.py                       # 24 cases, ~3 min on 2 cores
+    .venv/bin/python benchmarks/point_validation.py                       # 40 cases, ~3 min on 2 cores
     .venv/bin/python benchmarks/point_validation.py --gmm full:2:0.01 --w-gmm 100
     .venv/bin/python benchmarks/point_validation.py --config light_gmm_volume=0   # the GMM without its volume terms
 
