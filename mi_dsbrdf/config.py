@@ -18,6 +18,8 @@ from mi_dsbrdf.errors import ConfigError
 #: over pixels, so the weights are scaled by (observed pixels / PRIOR_PIXELS) to keep
 #: the balance of likelihood and priors the same at any image resolution
 PRIOR_PIXELS = 3000
+#: the priors of Eq. 18 (and two of ours), each weighted by Config.w_<name>
+PRIOR_NAMES = ("gmm", "hue", "entropy", "gradient", "chromaticity", "light_colour")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +45,21 @@ class Config:
         weight 1 the map came back as texel noise, worse than a constant map),
         the GMM prior strong (it resolves the split of gloss between material
         and light), hue and entropy at 1
+    w_chromaticity, w_light_colour : weights of the two priors that split the
+        image's colour between the material and the light, which one image
+        cannot tell apart (not in the paper):
+        :class:`~mi_dsbrdf.model.priors.ChromaticityPrior` (each lobe's colour
+        as in the library) and
+        :class:`~mi_dsbrdf.inference.illumination_priors.LightColourPrior`
+        (the map's mean colour near white). Under an illumination map only, in
+        the colour pass, with a joint step along the split
+        (:func:`~mi_dsbrdf.inference.envmap.colour_split`)
+    light_temperature_sigma, light_tint_sigma : spreads of the light-colour
+        prior along its colour temperature (blue-orange) and its tint
+        (green-magenta), in log RGB (:class:`~mi_dsbrdf.inference.
+        illumination_priors.LightColourPrior`): the root mean square of each
+        over the validation probes' mean colours
+        (``benchmarks/light_colours.py``)
     gradient_eps : eps of the hyper-Laplacian gradient prior (Eq. 16,
         :class:`~mi_dsbrdf.inference.illumination_priors.GradientPrior`), in log
         radiance per polar texel spacing: gradients smaller than it are priced
@@ -111,6 +128,10 @@ class Config:
     w_hue: float = 1.0
     w_entropy: float = 1.0
     w_gradient: float = 30000.0
+    w_chromaticity: float = 0.0
+    w_light_colour: float = 0.0
+    light_temperature_sigma: float = 0.26
+    light_tint_sigma: float = 0.05
     gradient_eps: float = 0.1
     gmm_volume: float = 0.0
     light_gmm_volume: float = 1.0
@@ -141,24 +162,25 @@ class Config:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1):
                 raise ConfigError("%s must be a number from 0 to 1, got %r" % (name, value))
-        for name in ("tol", "likelihood_scale", "gradient_eps"):
+        for name in ("tol", "likelihood_scale", "gradient_eps", "light_temperature_sigma",
+                     "light_tint_sigma"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ConfigError("%s must be a finite number > 0, got %r" % (name, value))
-        for name in ("w_gmm", "w_hue", "w_entropy", "w_gradient"):
+        for name in ("w_gmm", "w_hue", "w_entropy", "w_gradient", "w_chromaticity", "w_light_colour"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ConfigError("%s must be a finite number >= 0, got %r" % (name, value))
 
     def prior_weights(self, observed_pixels) -> dict:
-        """The weights {"gmm", "hue", "entropy", "gradient"} scaled to
-        ``observed_pixels`` (see :data:`PRIOR_PIXELS`)."""
+        """The weights {"gmm", "hue", "entropy", "gradient", "chromaticity",
+        "light_colour"} scaled to ``observed_pixels`` (see :data:`PRIOR_PIXELS`)."""
         n = observed_pixels / PRIOR_PIXELS
-        return {t: n * getattr(self, "w_" + t) for t in ("gmm", "hue", "entropy", "gradient")}
+        return {t: n * getattr(self, "w_" + t) for t in PRIOR_NAMES}
 
 
 #: No prior at all (likelihood only): the experiments' ablation.
-NO_PRIORS = dict(w_gmm=0.0, w_hue=0.0, w_entropy=0.0, w_gradient=0.0)
+NO_PRIORS = {"w_" + t: 0.0 for t in PRIOR_NAMES}
 
 #: The named settings: ``benchmarked`` (CLI, experiments, benchmarks) and ``demo``
 #: (the main job: the benchmarked setting on a 16x32 map, a few minutes on 2 cores).

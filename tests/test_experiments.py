@@ -365,3 +365,18 @@ def test_natural_light_choose_keeps_the_shipped_code_over_a_setting_with_fewer_w
     assert natural_light.choose(str(tmp_path))["best"] == "w_gmm100"          # no reference: the score alone
     with pytest.raises(SystemExit, match="has not run"):
         natural_light.choose(str(tmp_path), reference="w_gmm5")
+
+
+def test_the_light_colour_spreads_are_those_of_the_validation_probes(data):
+    """Config.light_temperature_sigma and light_tint_sigma are the root mean square
+    colour temperature and tint of the validation probes' mean light
+    (benchmarks/light_colours.py), rounded to 0.01; no report probe enters."""
+    from mi_dsbrdf.config import Config
+    import light_colours
+    import natural_light
+    t, g = light_colours.spreads(natural_light.VALIDATION_PROBES, data)
+    cfg = Config()
+    assert (cfg.light_temperature_sigma, cfg.light_tint_sigma) == (round(t, 2), round(g, 2))
+    # the orange grace probe (report) is warm, on the temperature axis, not the tint's
+    _, (temperature, tint) = light_colours.light_colour("probulator/grace.hdr", data)
+    assert temperature > 0.4 and abs(tint) < 0.1

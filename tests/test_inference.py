@@ -24,6 +24,21 @@ def sphere(bsdf):
     return sphere_scene(bsdf, RES)
 
 
+def image_under(props, sky):
+    """(RES, RES, 3) image of a sphere of ``props`` under the map ``sky`` (H, W, 3)."""
+    s = sphere(props)
+    ts = TexelSum(s, s.shapes()[0], sky.shape[:2])
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(sky)
+    return img.reshape(RES, RES, 3)
+
+
+def dsbrdf_view(map_hw):
+    """The view of a DSBRDF sphere that inference renders at ``map_hw`` texels."""
+    s = sphere({"type": "dsbrdf"})
+    return TexelSum(s, s.shapes()[0], map_hw)
+
+
 @pytest.fixture(scope="module")
 def observed():
     s = sphere({"type": "dsbrdf", "material": TRUTH})
@@ -112,17 +127,12 @@ def test_unknown_point_light_at_a_finite_distance_within_a_degree():
 
 def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
     from mi_dsbrdf.inference.latlong import procedural_sky
-    sky = procedural_sky(16, 32).astype(np.float64)
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (16, 32))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(sky)
-    s2 = sphere({"type": "dsbrdf"})
-    ts2 = TexelSum(s2, s2.shapes()[0], (8, 16))
+    img = image_under({"type": "dsbrdf", "material": TRUTH}, procedural_sky(16, 32).astype(np.float64))
+    ts2 = dsbrdf_view((8, 16))
     # texel centres: at 8x16 with 2x2 directions a texel, every texel has one that a
     # silhouette pixel sees at grazing angles, and none would be unseen
     cfg = Config(map_size=(8, 16), max_rounds=2, block_iters=5, illumination_iters=20, texel_samples=1)
-    res = recover_envmap(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(), cfg)
+    res = recover_envmap(ts2, img, ts2.mask, model_data.shipped_model(), cfg)
     passes = [r["pass"] for r in res.log]
     assert passes.count("start") == len(reflectance_starts(model_data.shipped_model()))
     assert "grey" in passes and "colour" in passes
@@ -206,3 +216,88 @@ def test_grey_texel_samples_runs_the_start_and_grey_pass_at_texel_centres():
     assert value[0]["colour"] != value[1]["colour"] and np.isfinite(value[1]["colour"])
     with pytest.raises(ConfigError, match="grey_texel_samples"):
         Config(grey_texel_samples=0)
+
+
+def grey_material_props(name):
+    psi = model_data.shipped_model().library_material(name).psi
+    props = {"type": "dsbrdf", "psi": " ".join(repr(float(v)) for v in psi)}
+    props.update({"chromaticity_%d" % r: "0.3333333 0.3333333 0.3333334" for r in range(3)})
+    return props
+
+
+def test_colour_split_moves_the_colour_the_image_cannot_place():
+    """Lobes tinted orange under a white map: the split step moves the tint into
+    the map (the chromaticity prior knows most lobes are near grey) as far as the
+    light-colour prior lets it, and leaves the broad lobe's light unchanged."""
+    from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma
+    from mi_dsbrdf.inference.envmap import colour_split
+    from mi_dsbrdf.inference.objective import Posterior
+    model = model_data.shipped_model()
+    s = sphere(grey_material_props("pvc"))
+    ts = TexelSum(s, s.shapes()[0], (4, 8))
+    observed = np.ones((RES, RES, 3))
+    orange = np.array([0.5, 0.3, 0.2])
+    logits = chroma_logits(np.tile(orange, (3, 1)))
+    x = np.random.default_rng(0).normal(0, 1, (4, 8, 1)).repeat(3, axis=2)       # a white map
+    seen = np.ones((4, 8), bool)
+    moved = []
+    for sigma in (0.26, 0.02):
+        post = Posterior(ts, observed, ts.mask, model, Config(map_size=(4, 8), w_chromaticity=1.0,
+                                                              w_light_colour=1.0, light_temperature_sigma=sigma))
+        new_logits, new_map = colour_split(post, logits, x, seen)
+        c, m = softmax_chroma(new_logits), np.exp(post.light_colour.colour(new_map))
+        # the broad lobe's colour times the light's is what it was, level included
+        np.testing.assert_allclose(c[0] * m, orange * np.exp(post.light_colour.colour(x)), rtol=1e-9)
+        moved.append(m / m.sum())
+    assert moved[0][0] > moved[0][2] + 0.1              # the map took the tint...
+    assert abs(moved[1][0] - moved[1][2]) < 0.03        # ... unless the light-colour prior is tight
+    unchanged = colour_split(post, chroma_logits(np.full((3, 3), 1 / 3)), x, seen)
+    assert np.abs(unchanged[1] - x).max() < 0.02       # grey lobes, white map: little to move
+
+
+def test_an_orange_light_goes_into_the_map_not_the_material():
+    """A grey material under an orange sky: with the colour-split priors the
+    recovered map is orange and the lobes near grey; without them the image's
+    colour stays in the material (its start)."""
+    from mi_dsbrdf.brdf.chromaticity import softmax_chroma
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    sky = procedural_sky(8, 16).astype(np.float64) * np.array([1.0, 0.6, 0.3])
+    img = image_under(grey_material_props("pvc"), sky)
+    ts2 = dsbrdf_view((8, 16))
+    base = Config(map_size=(8, 16), max_rounds=2, block_iters=5, illumination_iters=20, texel_samples=1)
+    model = model_data.shipped_model()
+    red_over_blue = {}
+    for on in (0.0, 1.0):
+        cfg = dataclasses.replace(base, w_chromaticity=on, w_light_colour=on)
+        res = recover_envmap(ts2, img, ts2.mask, model, cfg)
+        m = res.illumination[res.seen].mean(axis=0)
+        red_over_blue[on] = (m[0] / m[2], res.chromaticity[0, 0] / res.chromaticity[0, 2])
+        assert on == 0.0 or any(r.get("colour_split_kept") for r in res.log)
+    truth = (sky.mean(axis=(0, 1))[0] / sky.mean(axis=(0, 1))[2], 1.0)
+    assert red_over_blue[1.0][0] > red_over_blue[0.0][0] + 0.3        # the map is more orange
+    assert red_over_blue[1.0][1] < red_over_blue[0.0][1] - 0.3        # the material greyer
+    assert abs(np.log(red_over_blue[1.0][0] / truth[0])) < abs(np.log(red_over_blue[0.0][0] / truth[0]))
+
+
+def test_the_colour_split_priors_leave_the_start_and_the_grey_pass_alone(observed):
+    """The chromaticity and light-colour priors act in the colour pass only: the
+    start and the grey pass of a run with them are those of a run without, number
+    for number, and a light's recovery ignores them (its colour is the material's)."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    img = image_under({"type": "dsbrdf", "material": TRUTH}, procedural_sky(8, 16).astype(np.float64))
+    ts = dsbrdf_view((8, 16))
+    base = Config(map_size=(8, 16), max_rounds=2, block_iters=3, illumination_iters=10, texel_samples=1)
+    runs = [recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, **kw),
+                           starts=[np.zeros(model.basis.n_bases)])
+            for kw in ({}, {"w_chromaticity": 1.0, "w_light_colour": 1.0})]
+    before = [[r["neg_log_posterior"] for r in res.log if r["pass"] != "colour"] for res in runs]
+    assert before[0] == before[1]
+    assert "chromaticity" in runs[1].log[-1] and "chromaticity" not in runs[0].log[-1]
+    ts = dsbrdf_view((1, 1))
+    light = [recover_light(ts, observed, ts.mask, model, Config(max_rounds=1, block_iters=8, w_chromaticity=w),
+                           known_light=(LIGHT, 3.0)) for w in (0.0, 100.0)]
+    np.testing.assert_array_equal(light[0].psi, light[1].psi)
+    np.testing.assert_array_equal(light[0].chromaticity, light[1].chromaticity)
+    with pytest.raises(ConfigError, match="light_tint_sigma"):
+        Config(light_tint_sigma=0.0)

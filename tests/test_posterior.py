@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf.inference.likelihood import log_likelihood_terms
-from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior
+from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior, LightColourPrior
 
 
 def finite_differences(f, x, h=1e-6):
@@ -42,7 +42,8 @@ def lat_long_map(seed=1, H=8, W=16):
     return rng.normal(0, 1, (H, W, 3))
 
 
-@pytest.mark.parametrize("prior", [EntropyPrior(weight=2.0, n_bins=32), GradientPrior(weight=0.5, alpha=0.6)])
+@pytest.mark.parametrize("prior", [EntropyPrior(weight=2.0, n_bins=32), GradientPrior(weight=0.5, alpha=0.6),
+                                   LightColourPrior(weight=2.0, temperature_sigma=0.3, tint_sigma=0.05)])
 def test_illumination_prior_gradients_match_finite_differences(prior):
     x = lat_long_map()
     if isinstance(prior, EntropyPrior):
@@ -80,6 +81,26 @@ def test_entropy_prior_prefers_peaky_illumination_and_ignores_scale():
     peaky[2:4, 5:7] = 6.0                                               # sky + a sun
     assert e(peaky)[0] < e(spread)[0]
     assert e(spread + 2.0)[0] == pytest.approx(e(spread)[0], rel=1e-9)  # log-scale invariance
+
+
+def test_light_colour_prior_prices_the_maps_mean_colour_only():
+    p = LightColourPrior(weight=1.0, temperature_sigma=0.26, tint_sigma=0.05)
+    rng = np.random.default_rng(3)
+    grey = rng.normal(0, 2, (8, 16, 1)).repeat(3, axis=2)            # any white map, any structure
+    assert p(grey)[0] == pytest.approx(0.0, abs=1e-12)
+    orange = grey + np.log([1.0, 0.66, 0.47])                        # grace's colour, about
+    assert p(orange)[0] > 1.0
+    assert p(orange + 4.0)[0] == pytest.approx(p(orange)[0], rel=1e-9)     # the light's level is free
+    # a white map whose sun is orange: only the mean counts, and the mean is a little orange
+    sun = grey.copy()
+    sun[2, 3] += np.log([1.0, 0.66, 0.47]) + 5.0
+    assert 0 < p(sun)[0] < p(orange)[0]
+    # a green light as far from white as the orange one is far less probable
+    green = grey + np.log([0.66, 1.0, 0.66])
+    assert np.linalg.norm(p.colour(green) - p.colour(grey)) < np.linalg.norm(p.colour(orange) - p.colour(grey))
+    assert p(green)[0] > 5 * p(orange)[0]
+    with pytest.raises(ValueError, match="tint_sigma"):
+        LightColourPrior(tint_sigma=0.0)
 
 
 def test_posterior_illumination_terms_gradient_matches_finite_differences():

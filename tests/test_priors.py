@@ -1,12 +1,13 @@
-"""Reflectance priors: Gaussian mixture on psi (Eq. 6) and hue prior (Eq. 7-12)."""
+"""Reflectance priors: Gaussian mixture on psi (Eq. 6), hue prior (Eq. 7-12) and
+the chromaticity prior (ours: the material's side of the colour split)."""
 import math
 
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from mi_dsbrdf.model.priors import (GaussianMixture, HuePrior, fit_gmm, fit_hue_concentration, held_out_nll,
-                                    hue_cosines, select_gmm)
+from mi_dsbrdf.model.priors import (BROAD, ChromaticityPrior, GaussianMixture, HuePrior, fit_gmm,
+                                    fit_hue_concentration, held_out_nll, hue_cosines, log_chroma_coords, select_gmm)
 
 
 def three_clusters(seed=0):
@@ -138,3 +139,46 @@ def test_hue_concentration_maximum_likelihood():
     assert n == 4000 and k == pytest.approx(kappa, rel=0.08)
     with pytest.raises(ValueError, match="kappa_h"):
         HuePrior(float("nan"))
+
+
+def library_of_lobes(seed=5, m=80):
+    """(m, 2, 3) chromaticities: a broad lobe of many colours, a sharp lobe near grey,
+    and one degenerate sharp lobe (a lobe without energy, (0, 1, 0))."""
+    rng = np.random.default_rng(seed)
+    broad = rng.dirichlet([4, 4, 4], m)
+    sharp = rng.dirichlet([300, 300, 300], m)
+    sharp[0] = [0.0, 1.0, 0.0]
+    return np.stack([broad, sharp], axis=1)
+
+
+def test_chromaticity_prior_learns_each_lobe_and_its_gradient_is_exact():
+    p = ChromaticityPrior(library_of_lobes())
+    grey, tinted = np.full((2, 3), 1 / 3), np.tile([0.45, 0.32, 0.23], (2, 1))
+    assert p.nll(grey) < p.nll(tinted)
+    # a tint costs more on the sharp lobe (near grey in the library) than on the broad one
+    per_lobe = [v for v, _ in p._per_lobe(tinted)]
+    assert per_lobe[1] - p._per_lobe(grey)[1][0] > per_lobe[0] - p._per_lobe(grey)[0][0] + 1.0
+    c = np.array([[0.5, 0.3, 0.2], [0.3, 0.33, 0.37]])
+    g, h, fd = p.grad(c), 1e-7, np.zeros_like(c)
+    for idx in np.ndindex(c.shape):
+        e = np.zeros_like(c)
+        e[idx] = h
+        fd[idx] = (p.nll(c + e) - p.nll(c - e)) / (2 * h)
+    np.testing.assert_allclose(g, fd, rtol=1e-4, atol=1e-5)
+    # the degenerate lobe is left out: it would have widened the sharp lobe's kernels
+    assert len(p.lobes[1][0][0]) == 79 and len(p.lobes[0][0][0]) == 80
+    with pytest.raises(ValueError, match="lobes"):
+        p.nll(np.full((3, 3), 1 / 3))
+    with pytest.raises(ValueError, match="M, R, 3"):
+        ChromaticityPrior(np.ones((5, 3)))
+
+
+def test_chromaticity_prior_has_heavy_tails():
+    """Far from every library lobe the broad kernel takes over: the cost grows like
+    |y|^2 / (2 BROAD^2), not with the library kernels' curvature."""
+    p = ChromaticityPrior(library_of_lobes())
+    far = np.tile([0.02, 0.08, 0.9], (2, 1))
+    y = log_chroma_coords(far)[1]
+    v, gy = p._per_lobe(far)[1]
+    assert np.isfinite(v) and v < float(y @ y) / (2 * BROAD ** 2) + np.log(81 * 2 * np.pi * BROAD ** 2) + 1e-9
+    np.testing.assert_allclose(gy, y / BROAD ** 2, rtol=1e-3)

@@ -235,7 +235,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             out["seconds"] = time.perf_counter() - t0
             out["terms"] = {k: float(v) for k, v in result.log[-1].items()
                             if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
-                                     "gradient")}
+                                     "gradient", "chromaticity", "light_colour")}
             material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
             values = material.eval(samples.theta_h, samples.theta_d)
         else:

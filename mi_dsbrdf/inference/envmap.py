@@ -27,16 +27,23 @@ colour from that start (chromaticities and map colour free), unless the
 image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides). The start runs
 on the map at half its resolution (:func:`map_sizes`,
 ``Config.map_levels``); its map moves up by :func:`resample`.
+
+Colour split (not in the paper): one image shows only the product of the
+light's colour and the material's. Given the chromaticity and light-colour
+priors (``Config.w_chromaticity``, ``w_light_colour``), every colour round first
+moves along that product (:func:`colour_split`), which neither block can do
+alone, and keeps the move only if the posterior falls.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 from scipy.optimize import minimize
 
 from mi_dsbrdf.backend import single_blas_thread
-from mi_dsbrdf.brdf.chromaticity import softmax_chroma
+from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
@@ -44,11 +51,14 @@ from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
+from mi_dsbrdf.model.priors import LOG_CHROMA_BASIS
 
 #: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
 BLACK = -30.0
 #: upper bound of the log radiance of a texel
 LOG_MAX = 30.0
+#: the largest move of the colour split (colour_split) in log chromaticity
+SPLIT_LIMIT = 2.0
 #: the start's blocks run this fraction of a round's iterations (at least START_MIN_ITERS)
 START_FRACTION, START_MIN_ITERS = 0.5, 5
 def start_iters(iters) -> int:
@@ -83,13 +93,20 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     max_pixels = cfg.map_pairs // (cfg.map_size[0] * cfg.map_size[1])
 
     def posterior(size, pass_name):
-        samples = cfg.texel_samples
-        if pass_name in ("start", "grey") and cfg.grey_texel_samples is not None:
-            samples = cfg.grey_texel_samples
-        if (size, samples) not in posteriors:
-            posteriors[size, samples] = Posterior(texels.with_map_size(size, samples), observed, mask, model, cfg,
-                                                  max_pixels=max_pixels)
-        return posteriors[size, samples]
+        samples, pass_cfg = cfg.texel_samples, cfg
+        if pass_name in ("start", "grey"):
+            if cfg.grey_texel_samples is not None:
+                samples = cfg.grey_texel_samples
+            # the start and the grey pass hold the lobes at the image's colour and the
+            # map grey: the colour-split priors are constants there, and left out (a
+            # constant moved Levenberg-Marquardt's relative stopping test, and with
+            # it the whole run)
+            pass_cfg = dataclasses.replace(cfg, w_chromaticity=0.0, w_light_colour=0.0)
+        key = (size, samples, pass_cfg)
+        if key not in posteriors:
+            posteriors[key] = Posterior(texels.with_map_size(size, samples), observed, mask, model, pass_cfg,
+                                        max_pixels=max_pixels)
+        return posteriors[key]
 
     post = posterior(sizes[0], "start")
     logits0 = image_chroma_logits(post.observed, post.keep, post.R)
@@ -127,6 +144,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             scale = float(np.log(step.L.max() / L.max()))
             best = (value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK))
     _, psi, logits, log_map = best
+    splits = cfg.w_chromaticity > 0 or cfg.w_light_colour > 0
     for pass_name, size in zip(passes, sizes[1:]):
         post = posterior(size, pass_name)
         H, W = size
@@ -138,23 +156,35 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             seen = ~post.view.unseen.reshape(H, W)
             bins = post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
             log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
-            L = np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3)
             kept = posterior_at(post, psi, logits, log_map, T, seen, bins)
             # reflectance block, with the map's overall scale, over a subset of the
             # pixels: kept only if the posterior over all of them falls too (a step
             # that fits the subset can ruin the rest: a red fabric under ennis went
-            # from 7.6e3 to 4.9e5 that way)
-            step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True,
-                                     fit_chroma=pass_name == "colour")
-            new_map = log_map + float(np.log(step.L.max() / L.max()))
-            new_T = post.transport(step.psi, step.logits)   # serves the next illumination block
-            new = posterior_at(post, step.psi, step.logits, new_map, new_T, seen, bins)
-            rejected = not new[0] <= kept[0]
-            if not rejected:
-                psi, logits, log_map, T, kept = step.psi, step.logits, new_map, new_T, new
+            # from 7.6e3 to 4.9e5 that way). From the colour pass's second round it
+            # first takes the joint step along the colour split (colour_split), which
+            # neither block takes; the reflectance block then settles each lobe's
+            # brightness, and the two are kept or rejected together (if rejected, the
+            # block alone is tried). Not in the first round: the sharper lobes' colour
+            # is still the start's guess (START_GREY_MIX), not the image's, and a
+            # dark red paint under a blue sky put its red into the map on that guess
+            tries = [(logits, log_map)]
+            if pass_name == "colour" and splits and rnd > 0:
+                tries.insert(0, colour_split(post, logits, log_map, seen))
+            for split_tried, (try_logits, try_map) in zip([len(tries) == 2, False], tries):
+                L = np.where(seen[..., None], np.exp(try_map), 0.0).reshape(-1, 3)
+                step = reflectance_block(post, psi, try_logits, L, cfg.block_iters, fit_scale=True,
+                                         fit_chroma=pass_name == "colour")
+                new_map = try_map + float(np.log(step.L.max() / L.max()))
+                new_T = post.transport(step.psi, step.logits)   # serves the next illumination block
+                new = posterior_at(post, step.psi, step.logits, new_map, new_T, seen, bins)
+                rejected = not new[0] <= kept[0]
+                if not rejected:
+                    psi, logits, log_map, T, kept = step.psi, step.logits, new_map, new_T, new
+                    break
             total, lik, terms = kept
             log({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik, **terms,
-                 "unseen_texels": int((~seen).sum()), "map_size": [H, W], "reflectance_step_rejected": rejected})
+                 "unseen_texels": int((~seen).sum()), "map_size": [H, W], "reflectance_step_rejected": rejected,
+                 "colour_split_kept": bool(split_tried and not rejected)})
             if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
                 break
             prev = total
@@ -162,6 +192,37 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map), 0.0), seen=seen,
                     log=rows)
+
+
+def colour_split(post, logits, log_map, seen) -> tuple:
+    """The joint step along the split of colour between material and light (not in
+    the paper), which one image cannot see: the map's channels times g and every
+    lobe's chromaticity divided by g leave the image unchanged but for each lobe's
+    brightness (its chromaticity is renormalised), so neither block moves along it
+    (each holds the other's colour). g = exp(B u), u (2,) in the plane orthogonal to
+    (1, 1, 1) (:data:`~mi_dsbrdf.model.priors.LOG_CHROMA_BASIS`), minimises the
+    weighted chromaticity and light-colour priors, by L-BFGS-B within
+    +-SPLIT_LIMIT. The hue prior is left to the caller's acceptance test: it
+    prices the angles between the lobes' hues, which are undefined at grey, and
+    rewards any tint all lobes share over none (a grey material moved to the
+    bound). Returns (logits (R, 2), log map (H, W, 3)) after the step, the map
+    scaled to keep the broad lobe's (lobe 0) light exactly."""
+    c = softmax_chroma(logits)
+    log_m = post.light_colour.colour(np.where(seen[..., None], log_map, BLACK))
+
+    def moved(u):
+        lg = LOG_CHROMA_BASIS @ u
+        c2 = c * np.exp(-lg)
+        return lg, c2 / c2.sum(axis=1, keepdims=True), c2.sum(axis=1)
+
+    def cost(u):
+        lg, c2, _ = moved(u)
+        return (post.w["chromaticity"] * post.model.chromaticity_prior.nll(c2)
+                + post.light_colour.nll_of_colour(log_m + lg))
+
+    res = minimize(cost, np.zeros(2), method="L-BFGS-B", bounds=[(-SPLIT_LIMIT, SPLIT_LIMIT)] * 2)
+    lg, c2, sums = moved(res.x if res.fun < cost(np.zeros(2)) else np.zeros(2))
+    return chroma_logits(c2, floor=1e-3), np.where(seen[..., None], log_map + lg + np.log(sums[0]), BLACK)
 
 
 def psi_starts(model, starts=None) -> list:

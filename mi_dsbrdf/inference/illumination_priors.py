@@ -1,14 +1,21 @@
 """Illumination priors (paper Eq. 13-16), as negative log densities with gradients.
 
-Both act on the log radiance x = log L of an (H, W, C) lat-long map (the
-illumination is optimised in log, which keeps it positive), weight texels by
-their solid angle, and return (value, gradient with respect to x) in float64.
+The entropy and gradient priors act on the log radiance x = log L of an
+(H, W, C) lat-long map (the illumination is optimised in log, which keeps it
+positive), weight texels by their solid angle, and return (value, gradient
+with respect to x) in float64.
+:class:`LightColourPrior` (not in the paper) prices the colour of the light
+the whole map sheds.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from mi_dsbrdf.inference.latlong import texel_solid_angles
+
+#: (3, 2) the light-colour prior's axes in log RGB: colour temperature (R - B) and
+#: tint (R + B - 2 G), orthonormal and orthogonal to (1, 1, 1)
+LIGHT_AXES = np.array([[1.0, 0.0, -1.0], [1.0, -2.0, 1.0]]).T / np.array([np.sqrt(2.0), np.sqrt(6.0)])
 
 
 def _texel_weights(height, width):
@@ -108,3 +115,50 @@ class GradientPrior:
         g = -gphi + np.roll(gphi, 1, axis=1) - gth
         g[1:] += gth[:-1]
         return self.weight * val, self.weight * g
+
+
+class LightColourPrior:
+    """Not in the paper: a Gaussian on the colour of the light the map sheds,
+
+        -log p(L) = weight * (y_T^2 / sigma_T^2 + y_G^2 / sigma_G^2) / 2,
+        (y_T, y_G) = LIGHT_AXES^T log m,
+
+    m (3,) the solid-angle-weighted mean radiance of the map's texels (its
+    colour as a white sphere would see it). y_T is its colour temperature
+    (log R - log B over sqrt 2: positive warm, negative blue) and y_G its tint
+    (green negative, magenta positive), both 0 for white. Daylight, skies and
+    incandescent light lie along the temperature axis, hardly ever off it.
+    Only the product of the light's colour and the material's is observed;
+    with :class:`~mi_dsbrdf.model.priors.ChromaticityPrior` (the material's
+    side) this decides the split. ``temperature_sigma``, ``tint_sigma``: the
+    spreads (the `grace` probe's orange: y_T 0.54).
+    """
+
+    def __init__(self, weight=1.0, temperature_sigma=0.26, tint_sigma=0.05):
+        for name, v in (("temperature_sigma", temperature_sigma), ("tint_sigma", tint_sigma)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError("%s must be a finite number > 0, got %r" % (name, v))
+        self.weight = float(weight)
+        self.precision = 1.0 / np.array([temperature_sigma, tint_sigma], dtype=np.float64) ** 2
+
+    @staticmethod
+    def colour(log_map) -> np.ndarray:
+        """(3,) log of the solid-angle-weighted mean radiance of an (H, W, 3) log map."""
+        x = np.asarray(log_map, dtype=np.float64)
+        w = _texel_weights(*x.shape[:2])
+        return np.log(np.einsum("hw,hwc->c", w, np.exp(x)))
+
+    def nll_of_colour(self, log_m) -> float:
+        """The prior's value at the mean's log colour ``log_m`` (3,)."""
+        y = np.asarray(log_m, dtype=np.float64) @ LIGHT_AXES
+        return self.weight * float(y @ (self.precision * y)) / 2
+
+    def __call__(self, log_map):
+        """(value, gradient (H, W, 3)) of an (H, W, 3) log map."""
+        x = np.asarray(log_map, dtype=np.float64)
+        w = _texel_weights(*x.shape[:2])
+        e = w[..., None] * np.exp(x)
+        m = e.sum(axis=(0, 1))
+        y = np.log(m) @ LIGHT_AXES
+        g_log_m = self.weight * LIGHT_AXES @ (self.precision * y)
+        return self.weight * float(y @ (self.precision * y)) / 2, e * (g_log_m / m)

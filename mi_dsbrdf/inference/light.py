@@ -13,6 +13,7 @@ rounds of the reflectance block with the light refined jointly.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -116,7 +117,10 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         (1.00, 0.00, 0.00))
     """
     cfg = config or Config()
-    post = Posterior(texels, observed, mask, model, cfg, point=point, gmm_volume=cfg.light_gmm_volume)
+    # the light is white by assumption (its colour is the material's): the priors that
+    # split the image's colour between material and light are a map's
+    post = Posterior(texels, observed, mask, model, dataclasses.replace(cfg, w_chromaticity=0.0, w_light_colour=0.0),
+                     point=point, gmm_volume=cfg.light_gmm_volume)
     logits = image_chroma_logits(post.observed, post.keep, post.R)
     psi = np.zeros(post.k)
     t0 = time.perf_counter()

@@ -25,7 +25,7 @@ from mi_dsbrdf.brdf.dsbrdf import Material, log_lobe_energy
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint
 from mi_dsbrdf.inference.lobes import LobeSum
-from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior
+from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior, LightColourPrior
 from mi_dsbrdf.inference.likelihood import LOG_OFFSET, log_likelihood_terms
 
 #: how far (natural log) a recovered kappa/gamma control value may leave the range the
@@ -134,6 +134,8 @@ class Posterior:
         self.w = config.prior_weights(n_usable)
         self.entropy = EntropyPrior(self.w["entropy"])
         self.gradient = GradientPrior(self.w["gradient"], eps=config.gradient_eps)
+        self.light_colour = LightColourPrior(self.w["light_colour"], config.light_temperature_sigma,
+                                             config.light_tint_sigma)
 
     def aim(self, theta, phi) -> None:
         """Light the pixels from the direction (theta, phi) (seen from the object):
@@ -161,16 +163,31 @@ class Posterior:
 
     def prior_terms(self, psi, logits, log_map=None, bins=None) -> dict:
         """The weighted prior terms one by one, for the log: the curve penalty, GMM
-        (Eq. 6), hue (Eq. 12) and, given a map, entropy (Eq. 13-15) and gradient (Eq. 16)."""
+        (Eq. 6), hue (Eq. 12), chromaticity (if weighted) and, given a map,
+        entropy (Eq. 13-15), gradient (Eq. 16) and light colour (if weighted)."""
         terms = {"curve_penalty": self.curve_penalty(psi)[0]}
         if self.model.gmm is not None:
             terms["gmm"] = self.gmm_prior(psi)[0]
+        chroma = softmax_chroma(logits)
         if self.model.hue_prior is not None:
-            terms["hue"] = self.w["hue"] * self.model.hue_prior.nll(softmax_chroma(logits))
+            terms["hue"] = self.w["hue"] * self.model.hue_prior.nll(chroma)
+        if self.w["chromaticity"] > 0:
+            terms["chromaticity"] = self.w["chromaticity"] * self.model.chromaticity_prior.nll(chroma)
         if log_map is not None:
             terms["entropy"] = self.entropy(log_map, bins)[0]
             terms["gradient"] = self.gradient(log_map)[0]
+            if self.w["light_colour"] > 0:
+                terms["light_colour"] = self.light_colour(log_map)[0]
         return {k: float(v) for k, v in terms.items()}
+
+    def chroma_prior_grad(self, chroma) -> np.ndarray:
+        """d/d chromaticity (R, 3) of the weighted hue and chromaticity priors."""
+        g = np.zeros_like(np.asarray(chroma, dtype=np.float64))
+        if self.model.hue_prior is not None:
+            g += self.w["hue"] * self.model.hue_prior.grad(chroma)
+        if self.w["chromaticity"] > 0:
+            g += self.w["chromaticity"] * self.model.chromaticity_prior.grad(chroma)
+        return g
 
     def gmm_prior(self, psi) -> tuple:
         """(value, gradient, Gauss-Newton Hessian) of the weighted GMM prior (Eq. 6,
@@ -229,8 +246,12 @@ class Posterior:
         return lik * self.weight, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * (L * self.weight)
 
     def illumination_terms(self, log_map, T, seen, bins) -> tuple:
-        """(value, d/d log_map, likelihood) of likelihood + entropy + gradient priors at fixed reflectance."""
+        """(value, d/d log_map, likelihood) of likelihood + entropy + gradient (+ light
+        colour) priors at fixed reflectance."""
         lik, g = self.map_likelihood(log_map, T, seen)
         e, ge = self.entropy(log_map, bins)
         s, gs = self.gradient(log_map)
+        if self.w["light_colour"] > 0:
+            c, gc = self.light_colour(log_map)
+            return lik + e + s + c, g + ge + gs + gc, lik
         return lik + e + s, g + ge + gs, lik

@@ -7,7 +7,7 @@ w_i = rho'(d_i)/(d_i b), with the exact image Jacobian of
 :meth:`~mi_dsbrdf.inference.lobes.LobeSum.jacobian` (by the spline control
 values, chained to psi through the basis).
 The GMM prior enters as the quadratic of its most responsible component, the
-hue prior through its gradient, the curve penalty exactly. A step is kept only
+hue and chromaticity priors through their gradient, the curve penalty exactly. A step is kept only
 if the full negative log posterior falls.
 """
 from __future__ import annotations
@@ -159,9 +159,8 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         _, g_curve, h_curve = post.curve_penalty(p)
         H[:k, :k] += h_curve
         g[:k] += g_curve
-        if post.model.hue_prior is not None and fit_chroma:
-            gh = post.w["hue"] * post.model.hue_prior.grad(c)
-            g[k:k + 2 * R] += np.einsum("rl,rlk->rk", gh, dc_dz).reshape(-1)
+        if fit_chroma:
+            g[k:k + 2 * R] += np.einsum("rl,rlk->rk", post.chroma_prior_grad(c), dc_dz).reshape(-1)
         return g, H
 
     def propose(x, step):

@@ -15,6 +15,8 @@ and the priors
     gmm_weights (C,), gmm_means (C, k), gmm_covariances (C, k, k)   Eq. 6
     hue_kappa   ()                                                  Eq. 7-12
 
+(the chromaticity prior, :class:`~mi_dsbrdf.model.priors.ChromaticityPrior`,
+is learned from ``library_chroma`` when the file is read),
 plus what the build keeps for leave-one-out rebuilds and reports (written by
 :mod:`mi_dsbrdf.model.build`): ``fpca_bases``, ``fpca_variance``, the full fits
 ``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_flags``, their Eq. 5 errors on
@@ -34,7 +36,7 @@ import numpy as np
 from mi_dsbrdf.brdf.curves import CurveBasis
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.errors import MaterialError, ModelError
-from mi_dsbrdf.model.priors import GaussianMixture, HuePrior
+from mi_dsbrdf.model.priors import ChromaticityPrior, GaussianMixture, HuePrior
 
 SHIPPED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "model.npz")
 REQUIRED = ("knots", "mean", "bases", "library_names", "library_psi", "library_chroma")
@@ -91,6 +93,10 @@ class ReflectanceModel:
                 self.hue_prior = HuePrior(float(arrays["hue_kappa"]))
             except (TypeError, ValueError) as e:
                 raise ModelError("%s: bad hue prior: %s" % (source, e)) from None
+        try:
+            self.chromaticity_prior = ChromaticityPrior(chroma)
+        except ValueError as e:
+            raise ModelError("%s: bad chromaticity prior: %s" % (source, e)) from None
         try:
             self.info = json.loads(str(arrays["build_info"])) if "build_info" in arrays else {}
         except ValueError:

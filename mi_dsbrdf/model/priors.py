@@ -6,6 +6,10 @@
   * :class:`HuePrior` — Eq. 7-12, a von Mises prior on the angle between the hue
     vectors of every pair of lobes; the concentration kappa_h is fitted by
     maximum likelihood (:func:`fit_hue_concentration`).
+  * :class:`ChromaticityPrior` — not in the paper: a kernel density of each
+    lobe's log chromaticity over the library, the material's side of the split
+    of colour between material and light (its light's side:
+    :class:`~mi_dsbrdf.inference.illumination_priors.LightColourPrior`).
 
 All functions take float64 numpy arrays and return float64; ``nll`` methods
 return -log p up to the constants stated, ``grad`` methods its gradient.
@@ -267,3 +271,82 @@ def fit_hue_concentration(chromaticities, min_saturation=0.02) -> tuple:
     rbar = min(rbar, 1 - 1e-9)
     kappa = brentq(lambda k: i1e(k) / i0e(k) - rbar, 1e-9, 1e9)
     return float(kappa), len(cos)
+
+
+# --- chromaticity prior: how coloured each lobe of a real material is ---------------
+
+#: (3, 2) orthonormal basis of the plane orthogonal to (1, 1, 1): the log
+#: chromaticity's coordinates there ignore its (arbitrary) overall level
+LOG_CHROMA_BASIS = np.array([[1.0, -1.0, 0.0], [1.0, 1.0, -2.0]]).T / np.array([math.sqrt(2.0), math.sqrt(6.0)])
+#: a library lobe with a channel below this carries no colour worth learning (a
+#: lobe its fit left without energy, e.g. pink-fabric's second at (0, 1, 0))
+CHROMA_DEGENERATE = 0.01
+#: spread (log chromaticity) of the chromaticity prior's broad kernel: one step of
+#: 1 is a chromaticity of (0.2, 0.33, 0.47) from grey
+BROAD = 1.0
+
+
+def log_chroma_coords(chromaticity) -> np.ndarray:
+    """(..., 2) coordinates of log c in the plane orthogonal to (1, 1, 1), from
+    chromaticities (..., 3) (floored at 1e-6)."""
+    return np.log(np.maximum(np.asarray(chromaticity, dtype=np.float64), 1e-6)) @ LOG_CHROMA_BASIS
+
+
+class ChromaticityPrior:
+    """p(c) = prod_r p_r(y_r), y_r = :func:`log_chroma_coords` (c_r): a kernel
+    density of each lobe's log chromaticity over the library's materials, plus
+    one broad kernel for materials unlike any of them.
+
+    Under unknown light only the product of the light's colour and the
+    material's is observed; this prior is what the model knows about the
+    material's part. Learned per lobe because lobes differ (shipped library:
+    the broad lobe's median distance from grey is 0.54 in log chromaticity, the
+    sharper lobes' 0.13 and 0.11 — dielectric highlights are the light's
+    colour), with scipy's Gaussian kernel density and its bandwidth (Scott's
+    rule); the gradient is written here. The broad kernel, N(0, BROAD^2 I) with
+    the weight of one library material, keeps the tails heavy: with Gaussian
+    kernels alone a lobe far from every library one (a blue lobe on teflon
+    under the quarry probe) cost tens of nats and dragged the whole split with
+    it. ``library_chroma`` (M, R, 3); lobes with a channel below
+    CHROMA_DEGENERATE are left out of their lobe's density.
+    """
+
+    def __init__(self, library_chroma):
+        from scipy.stats import gaussian_kde     # scipy.stats is slow to import; only a model needs it
+        c = np.asarray(library_chroma, dtype=np.float64)
+        if c.ndim != 3 or c.shape[2] != 3:
+            raise ValueError("library chromaticities must be (M, R, 3), got %s" % (c.shape,))
+        self.lobes = []
+        for r in range(c.shape[1]):
+            y = log_chroma_coords(c[c[:, r].min(axis=1) >= CHROMA_DEGENERATE, r])
+            if len(y) < 3:
+                raise ValueError("lobe %d has %d usable library chromaticities; at least 3 are needed" % (r, len(y)))
+            cov = gaussian_kde(y.T).covariance
+            # kernels: (centres (n, 2), precision (2, 2), log weight + log normaliser)
+            log_w = -math.log(len(y) + 1)
+            self.lobes.append([(y, np.linalg.inv(cov), log_w - 0.5 * math.log(np.linalg.det(2 * math.pi * cov))),
+                               (np.zeros((1, 2)), np.eye(2) / BROAD ** 2, log_w - math.log(2 * math.pi * BROAD ** 2))])
+
+    def _per_lobe(self, chromaticity):
+        y = log_chroma_coords(chromaticity)                            # (R, 2)
+        if y.shape[0] != len(self.lobes):
+            raise ValueError("the prior has %d lobes, got %d chromaticities" % (len(self.lobes), y.shape[0]))
+        out = []
+        for r, kernels in enumerate(self.lobes):
+            d = [y[r] - centres for centres, _, _ in kernels]
+            e = np.concatenate([ln - 0.5 * np.einsum("mi,ij,mj->m", dk, P, dk)
+                                for dk, (_, P, ln) in zip(d, kernels)])
+            resp = np.exp(e - logsumexp(e))
+            g = np.concatenate([dk @ P for dk, (_, P, _) in zip(d, kernels)])
+            out.append((-float(logsumexp(e)), resp @ g))               # -log p_r, d(-log p_r)/dy_r
+        return out
+
+    def nll(self, chromaticity) -> float:
+        """-log p(c) of (R, 3) chromaticities (normalised density in y)."""
+        return float(sum(v for v, _ in self._per_lobe(chromaticity)))
+
+    def grad(self, chromaticity) -> np.ndarray:
+        """d(-log p)/d chromaticity, shape (R, 3)."""
+        c = np.maximum(np.asarray(chromaticity, dtype=np.float64), 1e-6)
+        gy = np.stack([g for _, g in self._per_lobe(c)])              # (R, 2)
+        return (gy @ LOG_CHROMA_BASIS.T) / c
