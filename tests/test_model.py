@@ -96,6 +96,22 @@ def test_model_file_priors_load(tmp_path):
     m = load_model(_arrays(tmp_path))
     assert m.gmm.dim == 4 and np.isfinite(m.gmm.nll(np.zeros(4)))
     assert m.hue_prior.kappa_h >= 0
+    assert np.isfinite(m.chromaticity_prior.nll(np.full((m.basis.n_lobes, 3), 1 / 3)))
+
+
+def test_a_library_too_small_for_the_chromaticity_prior_fails_only_when_it_is_used(tmp_path):
+    """A model of two materials loads (test_render renders with one); only the
+    chromaticity prior of the opt-in colour split, a density learned from the
+    library, says it cannot, when asked for."""
+    a = dict(np.load(_arrays(tmp_path)))
+    for k in ("library_names", "library_psi", "library_chroma"):
+        a[k] = a[k][:2]
+    p = tmp_path / "two.npz"
+    np.savez(p, **a)
+    m = load_model(p)
+    assert len(m.library) == 2
+    with pytest.raises(ModelError, match="chromaticity prior: lobe 0 has 2 usable"):
+        m.chromaticity_prior
 
 
 # --- the shipped model (built from MERL by `mi-dsbrdf build-model`) -------------------------

@@ -16,7 +16,7 @@ and the priors
     hue_kappa   ()                                                  Eq. 7-12
 
 (the chromaticity prior, :class:`~mi_dsbrdf.model.priors.ChromaticityPrior`,
-is learned from ``library_chroma`` when the file is read),
+is learned from ``library_chroma`` on first use),
 plus what the build keeps for leave-one-out rebuilds and reports (written by
 :mod:`mi_dsbrdf.model.build`): ``fpca_bases``, ``fpca_variance``, the full fits
 ``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_flags``, their Eq. 5 errors on
@@ -94,13 +94,18 @@ class ReflectanceModel:
             except (TypeError, ValueError) as e:
                 raise ModelError("%s: bad hue prior: %s" % (source, e)) from None
         try:
-            self.chromaticity_prior = ChromaticityPrior(chroma)
-        except ValueError as e:
-            raise ModelError("%s: bad chromaticity prior: %s" % (source, e)) from None
-        try:
             self.info = json.loads(str(arrays["build_info"])) if "build_info" in arrays else {}
         except ValueError:
             raise ModelError("%s: build_info is not JSON" % source) from None
+
+    @functools.cached_property
+    def chromaticity_prior(self) -> ChromaticityPrior:
+        """The chromaticity prior learned from the library (built on first use:
+        only the opt-in colour split needs it)."""
+        try:
+            return ChromaticityPrior(np.stack([c for _, c in self.library.values()]))
+        except ValueError as e:
+            raise ModelError("%s: bad chromaticity prior: %s" % (self.source, e)) from None
 
     @property
     def excluded(self) -> list:
