@@ -265,12 +265,16 @@ def overruled(name) -> str | None:
     return why[0] if why else None
 
 
+def own_rows(rows) -> list:
+    """This tool's results among ``rows`` (a report folder also holds the Adam baselines')."""
+    return [r for r in rows if r["case"].get("method", "dsbrdf") == "dsbrdf"]
+
+
 def near_lambertian_clean(rows) -> tuple:
     """(cases recovered without a highlight, near-Lambertian cases) of this tool's
     results ``rows``: measured peak / off-peak below NEAR_LAMBERTIAN, recovered below
     HIGHLIGHT_LIMIT times the measured one."""
-    near = [r for r in rows if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN
-            and r["case"].get("method", "dsbrdf") == "dsbrdf"]
+    near = [r for r in own_rows(rows) if r.get("truth_highlight_ratio", np.inf) < NEAR_LAMBERTIAN]
     return sum(r["highlight_ratio"] < HIGHLIGHT_LIMIT * r["truth_highlight_ratio"] for r in near), len(near)
 
 
@@ -279,7 +283,7 @@ def setting_scores(folder) -> dict:
     tool (a report folder also holds the Adam baselines' cases) of
     (result / doing nothing) and the fraction of cases below doing nothing;
     ``score`` is the mean of those medians (lower is better)."""
-    rows = [r for r in load_results(folder) if r["case"].get("method", "dsbrdf") == "dsbrdf"]   # not the Adam rows
+    rows = own_rows(load_results(folder))
     out = {"cases": len(rows), "seconds_median": float(np.median([r["seconds"] for r in rows]))}
     for key in CHOICE_MEASURES:
         wins, median = against_nothing(rows, key)
