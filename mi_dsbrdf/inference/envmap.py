@@ -30,9 +30,10 @@ on the map at half its resolution (:func:`map_sizes`,
 
 Colour split (not in the paper): one image shows only the product of the
 light's colour and the material's. Given the chromaticity and light-colour
-priors (``Config.w_chromaticity``, ``w_light_colour``), every colour round first
-moves along that product (:func:`colour_split`), which neither block can do
-alone, and keeps the move only if the posterior falls.
+priors (``Config.w_chromaticity``, ``w_light_colour``; off by default), every
+colour round from the second first moves along that product
+(:func:`colour_split`), which neither block can do alone, and keeps the move
+only if the posterior falls.
 """
 from __future__ import annotations
 
@@ -217,8 +218,8 @@ def colour_split(post, logits, log_map, seen) -> tuple:
 
     def cost(u):
         lg, c2, _ = moved(u)
-        return (post.w["chromaticity"] * post.model.chromaticity_prior.nll(c2)
-                + post.light_colour.nll_of_colour(log_m + lg))
+        material = post.w["chromaticity"] * post.model.chromaticity_prior.nll(c2) if post.w["chromaticity"] else 0.0
+        return material + post.light_colour.nll_of_colour(log_m + lg)
 
     res = minimize(cost, np.zeros(2), method="L-BFGS-B", bounds=[(-SPLIT_LIMIT, SPLIT_LIMIT)] * 2)
     lg, c2, sums = moved(res.x if res.fun < cost(np.zeros(2)) else np.zeros(2))

@@ -131,7 +131,7 @@ class LightColourPrior:
     Only the product of the light's colour and the material's is observed;
     with :class:`~mi_dsbrdf.model.priors.ChromaticityPrior` (the material's
     side) this decides the split. ``temperature_sigma``, ``tint_sigma``: the
-    spreads (the `grace` probe's orange: y_T 0.54).
+    spreads (the `grace` probe's orange: y_T 0.51).
     """
 
     def __init__(self, weight=1.0, temperature_sigma=0.26, tint_sigma=0.05):

@@ -281,8 +281,8 @@ LOG_CHROMA_BASIS = np.array([[1.0, -1.0, 0.0], [1.0, 1.0, -2.0]]).T / np.array([
 #: a library lobe with a channel below this carries no colour worth learning (a
 #: lobe its fit left without energy, e.g. pink-fabric's second at (0, 1, 0))
 CHROMA_DEGENERATE = 0.01
-#: spread (log chromaticity) of the chromaticity prior's broad kernel: one step of
-#: 1 is a chromaticity of (0.2, 0.33, 0.47) from grey
+#: spread (log chromaticity) of the chromaticity prior's broad kernel: at a distance
+#: of 1 from grey lie chromaticities such as (0.18, 0.18, 0.63) and (0.58, 0.14, 0.28)
 BROAD = 1.0
 
 
