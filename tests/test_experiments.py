@@ -380,3 +380,19 @@ def test_the_light_colour_spreads_are_those_of_the_validation_probes(data):
     # the orange grace probe (report) is warm, on the temperature axis, not the tint's
     _, (temperature, tint) = light_colours.light_colour("probulator/grace.hdr", data)
     assert temperature > 0.4 and abs(tint) < 0.1
+
+
+def test_colour_oracle_undoes_a_colour_moved_between_light_and_material(tmp_path):
+    """benchmarks/colour_oracle.py: a recovery whose map is the truth times a colour
+    and whose material is the truth's over it (relit images over it) is exact once
+    given the truth's mean colour, and not before."""
+    import colour_oracle
+    rng = np.random.default_rng(0)
+    truth_map = rng.uniform(0.1, 2.0, (8, 16, 3))
+    relit = rng.uniform(0.1, 1.0, (12, 12, 3))
+    colour = np.array([1.3, 1.0, 0.6])
+    np.savez(tmp_path / "x-dsbrdf-m-sphere-p.npz", illumination=np.stack([truth_map, truth_map * colour]),
+             pisa=np.stack([relit, relit / colour]))
+    out = colour_oracle.case_errors(tmp_path / "x-dsbrdf-m-sphere-p.npz")
+    assert out["oracle"][0] < 1e-6 and out["oracle"][1] < 1e-6
+    assert out["recovered"][0] > 0.05 and out["recovered"][1] > 0.05
