@@ -178,6 +178,17 @@ class Config:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ConfigError("%s must be a finite number >= 0, got %r" % (name, value))
 
+    @property
+    def colour_split(self) -> bool:
+        """Whether a map's inference splits the image's colour between light and
+        material (either weight of ``w_chromaticity``, ``w_light_colour`` above 0)."""
+        return self.w_chromaticity > 0 or self.w_light_colour > 0
+
+    def with_colour_split(self, on) -> "Config":
+        """This Config with the colour split on (both weights 1) or off (both 0)."""
+        w = 1.0 if on else 0.0
+        return dataclasses.replace(self, w_chromaticity=w, w_light_colour=w)
+
     def prior_weights(self, observed_pixels) -> dict:
         """The weights {"gmm", "hue", "entropy", "gradient", "chromaticity",
         "light_colour"} scaled to ``observed_pixels`` (see :data:`PRIOR_PIXELS`)."""

@@ -32,9 +32,8 @@ def _config(args):
     overrides = {k: v for k, v in (("map_size", args.map_size), ("max_rounds", args.rounds),
                                    ("block_iters", args.iters), ("texel_samples", args.texel_samples))
                  if v is not None}
-    if args.colour_split:
-        overrides.update(w_chromaticity=1.0, w_light_colour=1.0)
-    return dataclasses.replace(PRESETS[args.preset], **overrides)
+    cfg = dataclasses.replace(PRESETS[args.preset], **overrides)
+    return cfg.with_colour_split(True) if args.colour_split else cfg
 
 
 def cmd_render(args):

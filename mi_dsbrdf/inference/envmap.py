@@ -37,7 +37,6 @@ only if the posterior falls.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
@@ -102,7 +101,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             # map grey: the colour-split priors are constants there, and left out (a
             # constant moved Levenberg-Marquardt's relative stopping test, and with
             # it the whole run)
-            pass_cfg = dataclasses.replace(cfg, w_chromaticity=0.0, w_light_colour=0.0)
+            pass_cfg = cfg.with_colour_split(False)
         key = (size, samples, pass_cfg)
         if key not in posteriors:
             posteriors[key] = Posterior(texels.with_map_size(size, samples), observed, mask, model, pass_cfg,
@@ -145,7 +144,6 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             scale = float(np.log(step.L.max() / L.max()))
             best = (value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK))
     _, psi, logits, log_map = best
-    splits = cfg.w_chromaticity > 0 or cfg.w_light_colour > 0
     for pass_name, size in zip(passes, sizes[1:]):
         post = posterior(size, pass_name)
         H, W = size
@@ -168,10 +166,10 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             # block alone is tried). Not in the first round: the sharper lobes' colour
             # is still the start's guess (START_GREY_MIX), not the image's, and a
             # dark red paint under a blue sky put its red into the map on that guess
-            tries = [(logits, log_map)]
-            if pass_name == "colour" and splits and rnd > 0:
-                tries.insert(0, colour_split(post, logits, log_map, seen))
-            for split_tried, (try_logits, try_map) in zip([len(tries) == 2, False], tries):
+            tries = [(False, logits, log_map)]
+            if pass_name == "colour" and cfg.colour_split and rnd > 0:
+                tries.insert(0, (True, *colour_split(post, logits, log_map, seen)))
+            for split_tried, try_logits, try_map in tries:
                 L = np.where(seen[..., None], np.exp(try_map), 0.0).reshape(-1, 3)
                 step = reflectance_block(post, psi, try_logits, L, cfg.block_iters, fit_scale=True,
                                          fit_chroma=pass_name == "colour")

@@ -251,7 +251,8 @@ class Posterior:
         lik, g = self.map_likelihood(log_map, T, seen)
         e, ge = self.entropy(log_map, bins)
         s, gs = self.gradient(log_map)
+        value, grad = lik + e + s, g + ge + gs
         if self.w["light_colour"] > 0:
             c, gc = self.light_colour(log_map)
-            return lik + e + s + c, g + ge + gs + gc, lik
-        return lik + e + s, g + ge + gs, lik
+            value, grad = value + c, grad + gc
+        return value, grad, lik
