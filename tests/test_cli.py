@@ -59,17 +59,18 @@ def test_bad_map_size_is_a_usage_error(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["recover", "--scene", "s.xml", "--image", "i.exr", "--out", str(tmp_path / "o"), "--map-size", "16by32"])
     assert "HxW" in capsys.readouterr().err
-def test_colour_split_is_an_option_of_recover(capsys):
+def test_the_colour_split_is_on_by_default_and_an_option_of_recover(capsys):
     import argparse
     import pytest
     from mi_dsbrdf.app.cli import _config
     args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None)
-    on = _config(argparse.Namespace(colour_split=True, **args))
-    off = _config(argparse.Namespace(colour_split=False, **args))
-    assert (on.w_chromaticity, on.w_light_colour) == (1.0, 1.0) and (off.w_chromaticity, off.w_light_colour) == (0, 0)
+    on = _config(argparse.Namespace(no_colour_split=False, **args))
+    off = _config(argparse.Namespace(no_colour_split=True, **args))
+    assert (on.w_chromaticity, on.w_light_colour) == (1.0 / 3.0, 1.0) and on.colour_split
+    assert (off.w_chromaticity, off.w_light_colour) == (0, 0) and not off.colour_split
     with pytest.raises(SystemExit):
         main(["recover", "--help"])
-    assert "--colour-split" in capsys.readouterr().out
+    assert "--no-colour-split" in capsys.readouterr().out
 
 
 def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys):

@@ -290,7 +290,7 @@ def test_the_colour_split_priors_leave_the_start_and_the_grey_pass_alone(observe
     base = Config(map_size=(8, 16), max_rounds=2, block_iters=3, illumination_iters=10, texel_samples=1)
     runs = [recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, **kw),
                            starts=[np.zeros(model.basis.n_bases)])
-            for kw in ({}, {"w_chromaticity": 1.0, "w_light_colour": 1.0})]
+            for kw in ({"w_chromaticity": 0.0, "w_light_colour": 0.0}, {"w_chromaticity": 1.0, "w_light_colour": 1.0})]
     before = [[r["neg_log_posterior"] for r in res.log if r["pass"] != "colour"] for res in runs]
     assert before[0] == before[1]
     assert "chromaticity" in runs[1].log[-1] and "chromaticity" not in runs[0].log[-1]

@@ -101,8 +101,8 @@ def test_model_file_priors_load(tmp_path):
 
 def test_a_library_too_small_for_the_chromaticity_prior_fails_only_when_it_is_used(tmp_path):
     """A model of two materials loads (test_render renders with one); only the
-    chromaticity prior of the opt-in colour split, a density learned from the
-    library, says it cannot, when asked for."""
+    chromaticity prior of the colour split, a density learned from the library,
+    says it cannot, when asked for, and how to go on without it."""
     a = dict(np.load(_arrays(tmp_path)))
     for k in ("library_names", "library_psi", "library_chroma"):
         a[k] = a[k][:2]
@@ -110,7 +110,7 @@ def test_a_library_too_small_for_the_chromaticity_prior_fails_only_when_it_is_us
     np.savez(p, **a)
     m = load_model(p)
     assert len(m.library) == 2
-    with pytest.raises(ModelError, match="chromaticity prior: lobe 0 has 2 usable"):
+    with pytest.raises(ModelError, match="chromaticity prior: lobe 0 has 2 usable.*--no-colour-split"):
         m.chromaticity_prior
 
 

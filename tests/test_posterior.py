@@ -226,8 +226,8 @@ def test_gradient_prior_eps_sets_the_stiffness_of_flat_regions():
     s = sphere_scene({"type": "dsbrdf"}, 12)
     ts = TexelSum(s, s.shapes()[0], (4, 8))
     post = Posterior(ts, np.ones((12, 12, 3)), ts.mask, model_data.shipped_model(),
-                     Config(map_size=(4, 8), gradient_eps=0.1))
-    assert post.gradient.eps == 0.1
+                     Config(map_size=(4, 8), gradient_eps=0.1, gradient_alpha=0.3))
+    assert (post.gradient.eps, post.gradient.alpha) == (0.1, 0.3)
     x = np.zeros((8, 16, 3))
     e = np.zeros_like(x)
     e[4, 7, 0] = 1e-4

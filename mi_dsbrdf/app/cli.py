@@ -33,7 +33,7 @@ def _config(args):
                                    ("block_iters", args.iters), ("texel_samples", args.texel_samples))
                  if v is not None}
     cfg = dataclasses.replace(PRESETS[args.preset], **overrides)
-    return cfg.with_colour_split(True) if args.colour_split else cfg
+    return cfg.with_colour_split(False) if args.no_colour_split else cfg
 
 
 def cmd_render(args):
@@ -120,10 +120,10 @@ def _config_arguments(p, preset):
                    help="light each map texel from S x S directions in the colour pass (default 2; the start "
                         "and the grey pass run at the texel centres; 1: centres throughout, sharp highlights come "
                         "back too broad; see the README, Natural light)")
-    p.add_argument("--colour-split", action="store_true",
-                   help="under a map, split the image's colour between light and material by a prior on "
-                        "each (off by default: on validation it helped near-grey materials under warm light "
-                        "and hurt saturated ones under a blue sky; see the README, The colour split)")
+    p.add_argument("--no-colour-split", action="store_true",
+                   help="under a map, leave the image's colour in the material (the grey-world start) instead "
+                        "of splitting it between light and material by a prior on each (the default; see the "
+                        "README, The colour split)")
 
 
 def main(argv=None):

@@ -30,7 +30,7 @@ on the map at half its resolution (:func:`map_sizes`,
 
 Colour split (not in the paper): one image shows only the product of the
 light's colour and the material's. Given the chromaticity and light-colour
-priors (``Config.w_chromaticity``, ``w_light_colour``; off by default), every
+priors (``Config.w_chromaticity``, ``w_light_colour``; on by default), every
 colour round from the second first moves along that product
 (:func:`colour_split`), which neither block can do alone, and keeps the move
 only if the posterior falls.

@@ -98,14 +98,23 @@ class GradientPrior:
             raise ValueError("the hyper-Laplacian exponent alpha must be in (0, 1), got %r" % alpha)
         self.weight, self.alpha, self.eps = float(weight), float(alpha), float(eps)
 
-    def __call__(self, log_map):
+    @staticmethod
+    def differences(log_map) -> tuple:
+        """The prior's differences of an (H, W, C) log map, in polar texel spacings:
+        (d_phi (H, W, C), d_theta (H, W, C), 1 / sin theta scaled (H, 1, 1)); the last
+        row's d_theta is 0 (no neighbour past the pole)."""
         x = np.asarray(log_map, dtype=np.float64)
-        H_, W_, C = x.shape
+        H_, W_, _ = x.shape
         theta = (np.arange(H_) + 0.5) / H_ * np.pi
         inv_s = (1.0 / (np.sin(theta) * (2 * np.pi / W_) / (np.pi / H_)))[:, None, None]
         dphi = (np.roll(x, -1, axis=1) - x) * inv_s               # wraps in phi
         dth = np.zeros_like(x)
         dth[:-1] = x[1:] - x[:-1]                                  # no neighbour past the poles
+        return dphi, dth, inv_s
+
+    def __call__(self, log_map):
+        dphi, dth, inv_s = self.differences(log_map)
+        H_, W_, _ = dphi.shape
         m2 = (dphi ** 2 + dth ** 2).sum(axis=2) + self.eps ** 2    # (H, W)
         w = _texel_weights(H_, W_)
         val = float((w * m2 ** (self.alpha / 2)).sum())

@@ -101,11 +101,13 @@ class ReflectanceModel:
     @functools.cached_property
     def chromaticity_prior(self) -> ChromaticityPrior:
         """The chromaticity prior learned from the library (built on first use:
-        only the opt-in colour split needs it)."""
+        only the colour split under a map needs it, so a small model still loads
+        and serves point lights or inference with the split off)."""
         try:
             return ChromaticityPrior(np.stack([c for _, c in self.library.values()]))
         except ValueError as e:
-            raise ModelError("%s: bad chromaticity prior: %s" % (self.source, e)) from None
+            raise ModelError("%s: bad chromaticity prior: %s (the colour split needs it: turn the split off "
+                             "with --no-colour-split, or Config.with_colour_split(False))" % (self.source, e)) from None
 
     @property
     def excluded(self) -> list:
