@@ -31,6 +31,8 @@ from mi_dsbrdf.inference.latlong import texel_solid_angles  # noqa: E402
 OUT = os.path.join(ROOT, "benchmarks", "results", "gradient_statistics.json")
 #: the exponents the fit searches (open interval)
 ALPHA_RANGE = (0.02, 2.5)
+#: the dimension of the prior's v: 2 directions x 3 channels
+DIM = 6
 
 
 def gradient_magnitudes(log_map) -> tuple:
@@ -91,18 +93,15 @@ def main():
     out = {"probes": VALIDATION_PROBES, "map_size": [H, W], "eps": cfg.gradient_eps,
            "quantiles_of_gradient": dict(zip(["10", "25", "50", "75", "90", "99"],
                                              np.quantile(g, [.1, .25, .5, .75, .9, .99]).round(3).tolist())),
-           "fits": []}
-    for dim, what in ((6, "colour gradient (the prior's v: 2 directions x 3 channels)"),):
-        best = fit(g, w, cfg.gradient_eps, dim)
-        held = [fit(g, w, cfg.gradient_eps, dim, alpha=a) for a in (0.15, 0.3, 0.5, 0.8)]
-        out["fits"].append({"dimensions": dim, "what": what, "maximum_likelihood": best, "at_alpha": held})
+           "dimensions": DIM}
+    best = fit(g, w, cfg.gradient_eps, DIM)
+    out["maximum_likelihood"] = best
+    out["at_alpha"] = [fit(g, w, cfg.gradient_eps, DIM, alpha=a) for a in (0.15, 0.3, 0.5, 0.8)]
     print("validation probes at %dx%d, |v| quantiles (10, 25, 50, 75, 90, 99 %%): %s"
           % (H, W, list(out["quantiles_of_gradient"].values())))
-    for f in out["fits"]:
-        b = f["maximum_likelihood"]
-        edge = " (the search's lower bound: the tail is heavier than any alpha)" if b["alpha"] < ALPHA_RANGE[0] + 0.005 else ""
-        print("%s: maximum-likelihood alpha %.3f%s (mean -log p %.3f); at alpha " % (f["what"], b["alpha"], edge, b["nll"])
-              + ", ".join("%.2f: %.3f" % (h["alpha"], h["nll"]) for h in f["at_alpha"]))
+    edge = " (the search's lower bound: the tail is heavier than any alpha)" if best["alpha"] < ALPHA_RANGE[0] + 0.005 else ""
+    print("maximum-likelihood alpha %.3f%s (mean -log p %.3f); at alpha " % (best["alpha"], edge, best["nll"])
+          + ", ".join("%.2f: %.3f" % (h["alpha"], h["nll"]) for h in out["at_alpha"]))
     with open(OUT, "w") as fh:
         json.dump(out, fh, indent=1)
     print("->", os.path.relpath(OUT, ROOT))
