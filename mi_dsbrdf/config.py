@@ -95,6 +95,12 @@ class Config:
         a narrow band of theta_d, and the prior carries more of the answer there
     map_levels : the start runs on ``map_size`` halved ``map_levels - 1`` times,
         the passes on ``map_size`` (:func:`mi_dsbrdf.inference.envmap.map_sizes`)
+    start_candidates : how many of the reflectance starts, the best by their
+        posterior on the start's map, each run the grey pass; the lowest
+        posterior at its end continues to the colour pass (1: the start's choice
+        stands). The start's coarse map at texel centres misjudges sharp lobes:
+        a specular phenolic under a probe of small bright lights chose a start
+        that ended with the highest posterior of all five and lost its highlight
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,
@@ -145,6 +151,7 @@ class Config:
     gmm_volume: float = 0.0
     light_gmm_volume: float = 1.0
     map_levels: int = 2
+    start_candidates: int = 1
     texel_samples: int = 2
     grey_texel_samples: int | None = 1
     reflectance_pairs: int = 500_000
@@ -159,6 +166,7 @@ class Config:
             raise ConfigError("map_size %dx%d is too small (at least 2x4)" % (h, w))
         object.__setattr__(self, "map_size", (h, w))
         for name, low in (("max_rounds", 1), ("block_iters", 1), ("illumination_iters", 1), ("map_levels", 1),
+                          ("start_candidates", 1),
                           ("texel_samples", 1),
                           ("reflectance_pairs", 64), ("map_pairs", 64)):
             value = getattr(self, name)

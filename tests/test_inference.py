@@ -218,6 +218,34 @@ def test_grey_texel_samples_runs_the_start_and_grey_pass_at_texel_centres():
         Config(grey_texel_samples=0)
 
 
+
+def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
+    """``Config.start_candidates`` 2: the two best starts by their posterior each
+    run the grey pass (rows tagged with the candidate); the first candidate's
+    pass is the one-candidate run's, number for number, and the colour pass
+    continues from the candidate whose grey pass ended lowest."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10, texel_samples=1)
+    one, two = (recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, dataclasses.replace(base, start_candidates=n))
+                for n in (1, 2))
+    starts = [r["neg_log_posterior"] for r in two.log if r["pass"] == "start"]
+    assert starts == [r["neg_log_posterior"] for r in one.log if r["pass"] == "start"] and len(starts) >= 2
+    grey = {c: [r["neg_log_posterior"] for r in two.log if r["pass"] == "grey" and r.get("candidate") == c]
+            for c in (0, 1)}
+    assert grey[0] and grey[1] and grey[0] != grey[1]
+    assert grey[0] == [r["neg_log_posterior"] for r in one.log if r["pass"] == "grey"]
+    assert all("candidate" not in r for r in one.log)
+    same = grey[0][-1] <= grey[1][-1]
+    colour = [r["neg_log_posterior"] for r in two.log if r["pass"] == "colour"]
+    assert (colour == [r["neg_log_posterior"] for r in one.log if r["pass"] == "colour"]) == same
+    with pytest.raises(ConfigError, match="start_candidates"):
+        Config(start_candidates=0)
+
 def grey_material_props(name):
     psi = model_data.shipped_model().library_material(name).psi
     props = {"type": "dsbrdf", "psi": " ".join(repr(float(v)) for v in psi)}

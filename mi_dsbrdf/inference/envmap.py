@@ -19,7 +19,9 @@ Start: chromaticity from the image's colour
 (:func:`~mi_dsbrdf.inference.reflectance.image_chroma_logits`) and, for each of
 :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (psi = 0 and the
 GMM means), a constant map at the image's level refined by a short grey
-illumination block and a short reflectance block; the best starts the rounds.
+illumination block and a short reflectance block; the best
+(``Config.start_candidates`` of them: each runs the grey pass, and the lowest
+posterior at its end goes on) starts the rounds (:func:`alternate`).
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
 channels: the grey-world assumption; the lobes keep the image's colour), then
@@ -125,8 +127,9 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # never undid it (it turned the map blue instead); the colour pass frees them
     # start (on the coarse map): each reflectance start with the constant map that
     # matches the image's median level, refined by one grey illumination block and
-    # one reflectance block; the best posterior starts the alternation
-    best = None
+    # one reflectance block; the best Config.start_candidates of them by posterior
+    # each run the grey pass, and the lowest posterior at its end continues
+    found = []
     H, W = sizes[0]
     for p0 in psi_starts(model, starts):
         T = post.transport(p0, logits0)
@@ -140,57 +143,73 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                                  fit_chroma=False)
         value = post.reflectance_terms(step.psi, step.logits, step.L)[0]
         log({"pass": "start", "round": len(rows), "neg_log_posterior": value, "map_size": list(sizes[0])})
-        if best is None or value < best[0]:
-            scale = float(np.log(step.L.max() / L.max()))
-            best = (value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK))
-    _, psi, logits, log_map = best
-    for pass_name, size in zip(passes, sizes[1:]):
-        post = posterior(size, pass_name)
-        H, W = size
-        log_map = resample(log_map, size)
-        T = post.transport(psi, logits)
-        prev = None
-        for rnd in range(cfg.max_rounds):
-            # illumination block (T from the current reflectance)
-            seen = ~post.view.unseen.reshape(H, W)
-            bins = post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
-            log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
-            kept = posterior_at(post, psi, logits, log_map, T, seen, bins)
-            # reflectance block, with the map's overall scale, over a subset of the
-            # pixels: kept only if the posterior over all of them falls too (a step
-            # that fits the subset can ruin the rest: a red fabric under ennis went
-            # from 7.6e3 to 4.9e5 that way). From the colour pass's second round it
-            # first takes the joint step along the colour split (colour_split), which
-            # neither block takes; the reflectance block then settles each lobe's
-            # brightness, and the two are kept or rejected together (if rejected, the
-            # block alone is tried). Not in the first round: the sharper lobes' colour
-            # is still the start's guess (START_GREY_MIX), not the image's, and a
-            # dark red paint under a blue sky put its red into the map on that guess
-            tries = [(False, logits, log_map)]
-            if pass_name == "colour" and cfg.colour_split and rnd > 0:
-                tries.insert(0, (True, *colour_split(post, logits, log_map, seen)))
-            for split_tried, try_logits, try_map in tries:
-                L = np.where(seen[..., None], np.exp(try_map), 0.0).reshape(-1, 3)
-                step = reflectance_block(post, psi, try_logits, L, cfg.block_iters, fit_scale=True,
-                                         fit_chroma=pass_name == "colour")
-                new_map = try_map + float(np.log(step.L.max() / L.max()))
-                new_T = post.transport(step.psi, step.logits)   # serves the next illumination block
-                new = posterior_at(post, step.psi, step.logits, new_map, new_T, seen, bins)
-                rejected = not new[0] <= kept[0]
-                if not rejected:
-                    psi, logits, log_map, T, kept = step.psi, step.logits, new_map, new_T, new
-                    break
-            total, lik, terms = kept
-            log({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik, **terms,
-                 "unseen_texels": int((~seen).sum()), "map_size": [H, W], "reflectance_step_rejected": rejected,
-                 "colour_split_kept": bool(split_tried and not rejected)})
-            if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
-                break
-            prev = total
+        scale = float(np.log(step.L.max() / L.max()))
+        found.append((value, len(found), step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK)))
+    candidates = sorted(found, key=lambda f: f[:2])[:cfg.start_candidates]
+    # the grey pass from each candidate (one candidate: the start's choice stands)
+    ends = [alternate(posterior(sizes[1], passes[0]), passes[0], sizes[1], psi, logits, log_map, cfg, log,
+                      candidate=i if len(candidates) > 1 else None)
+            for i, (_, _, psi, logits, log_map) in enumerate(candidates)]
+    psi, logits, log_map, seen, _ = min(ends, key=lambda e: e[4])
+    for pass_name, size in zip(passes[1:], sizes[2:]):
+        psi, logits, log_map, seen, _ = alternate(posterior(size, pass_name), pass_name, size, psi, logits,
+                                                  log_map, cfg, log)
     chroma = softmax_chroma(logits)
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map), 0.0), seen=seen,
                     log=rows)
+
+
+def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=None) -> tuple:
+    """One pass of alternating illumination and reflectance blocks (at most
+    ``cfg.max_rounds`` rounds, until the posterior changes by less than
+    ``cfg.tol``) on a map of ``size`` from the given state (the map resampled to
+    it). Logs one row per round (``candidate``: which of the start's candidates
+    the pass runs from, if several). Returns (psi, logits, log map, seen (H, W),
+    negative log posterior)."""
+    H, W = size
+    log_map = resample(log_map, size)
+    T = post.transport(psi, logits)
+    seen = ~post.view.unseen.reshape(H, W)
+    extra = {} if candidate is None else {"candidate": candidate}
+    prev = kept = None
+    for rnd in range(cfg.max_rounds):
+        # illumination block (T from the current reflectance)
+        bins = post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
+        log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
+        kept = posterior_at(post, psi, logits, log_map, T, seen, bins)
+        # reflectance block, with the map's overall scale, over a subset of the
+        # pixels: kept only if the posterior over all of them falls too (a step
+        # that fits the subset can ruin the rest: a red fabric under ennis went
+        # from 7.6e3 to 4.9e5 that way). From the colour pass's second round it
+        # first takes the joint step along the colour split (colour_split), which
+        # neither block takes; the reflectance block then settles each lobe's
+        # brightness, and the two are kept or rejected together (if rejected, the
+        # block alone is tried). Not in the first round: the sharper lobes' colour
+        # is still the start's guess (START_GREY_MIX), not the image's, and a
+        # dark red paint under a blue sky put its red into the map on that guess
+        tries = [(False, logits, log_map)]
+        if pass_name == "colour" and cfg.colour_split and rnd > 0:
+            tries.insert(0, (True, *colour_split(post, logits, log_map, seen)))
+        for split_tried, try_logits, try_map in tries:
+            L = np.where(seen[..., None], np.exp(try_map), 0.0).reshape(-1, 3)
+            step = reflectance_block(post, psi, try_logits, L, cfg.block_iters, fit_scale=True,
+                                     fit_chroma=pass_name == "colour")
+            new_map = try_map + float(np.log(step.L.max() / L.max()))
+            new_T = post.transport(step.psi, step.logits)   # serves the next illumination block
+            new = posterior_at(post, step.psi, step.logits, new_map, new_T, seen, bins)
+            rejected = not new[0] <= kept[0]
+            if not rejected:
+                psi, logits, log_map, T, kept = step.psi, step.logits, new_map, new_T, new
+                break
+        total, lik, terms = kept
+        log({"pass": pass_name, "round": rnd, **extra, "neg_log_posterior": total, "likelihood": lik, **terms,
+             "unseen_texels": int((~seen).sum()), "map_size": [H, W], "reflectance_step_rejected": rejected,
+             "colour_split_kept": bool(split_tried and not rejected)})
+        if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
+            break
+        prev = total
+    return psi, logits, log_map, seen, kept[0]
 
 
 def colour_split(post, logits, log_map, seen) -> tuple:
