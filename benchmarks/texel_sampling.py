@@ -21,12 +21,13 @@ measure (Eq. 19), whose scale b is ``Config.likelihood_scale`` (0.05).
 Validation materials and probes only (``natural_light.py``).
 
     .venv/bin/python benchmarks/texel_sampling.py [--workers 2]   # ~12 min on one worker, 5 GB each
-    .venv/bin/python benchmarks/texel_sampling.py --speed   # inference time of four settings side by side, ~3 min
+    .venv/bin/python benchmarks/texel_sampling.py --speed   # inference time of five settings side by side, ~4 min
 
 ``--speed`` times ``inference_cases.py``'s natural-light case (a 128x128 sphere,
 32x64 map, two passes) at the texel centres throughout, at the shipped setting
 (centres in the start and the grey pass, 2 x 2 in the colour pass, the colour
-split on), the same with the colour split off, and at 2 x 2 throughout
+split on, one start candidate), the same with the colour split off or with
+two start candidates, and at 2 x 2 throughout
 (:data:`SPEED_SETTINGS`), in turn, twice each, in one process, and stores the
 figures under ``"speed"``.
 
@@ -98,9 +99,11 @@ def table(rows) -> str:
 
 
 #: the settings ``--speed`` times: Config overrides of the benchmarked preset (the texel
-#: sampling of the start and the grey pass, of the colour pass; the colour split)
+#: sampling of the start and the grey pass, of the colour pass; the colour split; the
+#: number of starts that run the grey pass)
 SPEED_SETTINGS = {"centres": dict(grey_texel_samples=1, texel_samples=1), "shipped": {},
                   "shipped, colour split off": dict(w_chromaticity=0.0, w_light_colour=0.0),
+                  "shipped, two start candidates": dict(start_candidates=2),
                   "2 throughout": dict(grey_texel_samples=2, texel_samples=2)}
 
 
@@ -122,9 +125,9 @@ def speed() -> dict:
             t0 = time.perf_counter()
             recover_envmap(ts, img, ts.mask, model, cfg)
             out[name].append(time.perf_counter() - t0)
-            print("%s (grey pass %d, colour pass %d, colour split %s): %.1f s"
+            print("%s (grey pass %d, colour pass %d, colour split %s, %d start candidates): %.1f s"
                   % (name, cfg.grey_texel_samples, cfg.texel_samples, "on" if cfg.colour_split else "off",
-                     out[name][-1]), flush=True)
+                     cfg.start_candidates, out[name][-1]), flush=True)
     centres = np.median(out["centres"])
     return {"seconds": out, "settings": SPEED_SETTINGS,
             "ratio_to_centres": {k: float(np.median(v) / centres) for k, v in out.items()}}
@@ -137,7 +140,7 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2, help="processes (each holds a 5 GB transport)")
     ap.add_argument("--speed", action="store_true",
                     help="time the inference at the texel centres, the shipped setting, the shipped setting without "
-                         "the colour split and 2 x 2 throughout instead")
+                         "the colour split or with two start candidates, and 2 x 2 throughout instead")
     args = ap.parse_args(argv)
     if args.speed:
         with open(OUT) as f:

@@ -101,6 +101,12 @@ class Config:
         stands). The start's coarse map at texel centres misjudges sharp lobes:
         a specular phenolic under a probe of small bright lights chose a start
         that ended with the highest posterior of all five and lost its highlight
+        (a start on the full map instead, ``map_levels`` 1, lost 4 BRDF wins of
+        60 on validation). 2 fixes that case and was the accuracy rule's
+        choice on validation in the eleventh session, by a score within the
+        noise of a rerun (0.531 against 0.534; it changes 25 of 60 cases, 13
+        lower and 12 higher), at 1.25-1.49x the time side by side: 1 stays the
+        default (README, Natural light, "The eleventh session")
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,

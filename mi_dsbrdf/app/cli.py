@@ -30,7 +30,8 @@ def _setup(variant):
 def _config(args):
     """The named preset with the command line's overrides (validated)."""
     overrides = {k: v for k, v in (("map_size", args.map_size), ("max_rounds", args.rounds),
-                                   ("block_iters", args.iters), ("texel_samples", args.texel_samples))
+                                   ("block_iters", args.iters), ("texel_samples", args.texel_samples),
+                                   ("start_candidates", args.start_candidates))
                  if v is not None}
     cfg = dataclasses.replace(PRESETS[args.preset], **overrides)
     return cfg.with_colour_split(False) if args.no_colour_split else cfg
@@ -120,6 +121,11 @@ def _config_arguments(p, preset):
                    help="light each map texel from S x S directions in the colour pass (default 2; the start "
                         "and the grey pass run at the texel centres; 1: centres throughout, sharp highlights come "
                         "back too broad; see the README, Natural light)")
+    p.add_argument("--start-candidates", type=int, default=None, metavar="N",
+                   help="under a map, run the grey pass from the N best reflectance starts and go on from the "
+                        "lowest posterior (default 1; 2 takes about 1.5x the time and keeps sharp highlights "
+                        "under small bright lights that the coarse start can misjudge; see the README, "
+                        "Natural light)")
     p.add_argument("--no-colour-split", action="store_true",
                    help="under a map, leave the image's colour in the material (the grey-world start) instead "
                         "of splitting it between light and material by a prior on each (the default; see the "
