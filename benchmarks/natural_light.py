@@ -254,10 +254,11 @@ OVERRULED = {"texel_samples2": "chosen on validation (0.565 against 0.623 at tex
                                "report set (BRDF better than the mean material in 51 of 72 cases against 59, "
                                "relit in 61 against 65): spurious sharp highlights on mildly glossy materials, "
                                "which the validation set had few of",
-             "start_candidates2": "chosen on validation by a score within the noise of a rerun (0.531 against 0.534; "
-                                  "it changes 25 of 60 cases, 13 lower and 12 higher on every measure) at 1.25-1.49x the "
-                                  "time of one candidate side by side, which breaks issue 14's 20 s target on the "
-                                  "128-pixel case (26.3 s); an option (--start-candidates 2), not the default"}
+             "start_candidates2": "chosen on validation by a score within the noise of a rerun (0.531 against "
+                                  "0.534; it changes 25 of 60 cases, 13 lower and 12 higher on every measure) at "
+                                  "1.25-1.49x the time of one candidate side by side, which breaks issue 14's 20 s "
+                                  "target on the 128-pixel case (26.3 s); an option (--start-candidates 2), not the "
+                                  "default"}
 #: the validation folder of the shipped code, the default reference of the choice's wins
 #: guard (:func:`choose`, ``--choose-gmm --reference``); rerun it when the shipped code's
 #: results may have moved. One run is one draw: the code before it, stored in

@@ -231,8 +231,8 @@ def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     img = np.zeros((RES * RES, 3))
     img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
     base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10, texel_samples=1)
-    one, two = (recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, dataclasses.replace(base, start_candidates=n))
-                for n in (1, 2))
+    one, two = (recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model,
+                               dataclasses.replace(base, start_candidates=n)) for n in (1, 2))
     starts = [r["neg_log_posterior"] for r in two.log if r["pass"] == "start"]
     assert starts == [r["neg_log_posterior"] for r in one.log if r["pass"] == "start"] and len(starts) >= 2
     grey = {c: [r["neg_log_posterior"] for r in two.log if r["pass"] == "grey" and r.get("candidate") == c]
