@@ -144,12 +144,14 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         value = post.reflectance_terms(step.psi, step.logits, step.L)[0]
         log({"pass": "start", "round": len(rows), "neg_log_posterior": value, "map_size": list(sizes[0])})
         scale = float(np.log(step.L.max() / L.max()))
-        found.append((value, len(found), step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK)))
-    candidates = sorted(found, key=lambda f: f[:2])[:cfg.start_candidates]
+        found.append((value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK)))
+    # sorted is stable: equal posteriors keep the starts' order
+    candidates = sorted(found, key=lambda f: f[0])[:cfg.start_candidates]
     # the grey pass from each candidate (one candidate: the start's choice stands)
-    ends = [alternate(posterior(sizes[1], passes[0]), passes[0], sizes[1], psi, logits, log_map, cfg, log,
+    first = posterior(sizes[1], passes[0])
+    ends = [alternate(first, passes[0], sizes[1], psi, logits, log_map, cfg, log,
                       candidate=i if len(candidates) > 1 else None)
-            for i, (_, _, psi, logits, log_map) in enumerate(candidates)]
+            for i, (_, psi, logits, log_map) in enumerate(candidates)]
     psi, logits, log_map, seen, _ = min(ends, key=lambda e: e[4])
     for pass_name, size in zip(passes[1:], sizes[2:]):
         psi, logits, log_map, seen, _ = alternate(posterior(size, pass_name), pass_name, size, psi, logits,
