@@ -223,7 +223,9 @@ def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     """``Config.start_candidates`` 2: the two best starts by their posterior each
     run the grey pass (rows tagged with the candidate); the first candidate's
     pass is the one-candidate run's, number for number, and the colour pass
-    continues from the candidate whose grey pass ended lowest."""
+    continues from the candidate whose grey pass ended lowest; with
+    ``candidate_choice`` "final" each candidate runs both passes and the one
+    whose colour pass ended lowest is the answer."""
     from mi_dsbrdf.inference.latlong import procedural_sky
     model = model_data.shipped_model()
     s = sphere({"type": "dsbrdf", "material": TRUTH})
@@ -245,6 +247,21 @@ def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     assert (colour == [r["neg_log_posterior"] for r in one.log if r["pass"] == "colour"]) == same
     with pytest.raises(ConfigError, match="start_candidates"):
         Config(start_candidates=0)
+    # candidate_choice "final": each candidate runs both passes (its rows tagged),
+    # the grey passes are those above, and the answer is the candidate whose
+    # colour pass ended lowest
+    final = recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model,
+                           dataclasses.replace(base, start_candidates=2, candidate_choice="final"))
+    rows = {(p, c): [r["neg_log_posterior"] for r in final.log if r["pass"] == p and r.get("candidate") == c]
+            for p in ("grey", "colour") for c in (0, 1)}
+    assert rows["grey", 0] == grey[0] and rows["grey", 1] == grey[1]
+    assert rows["colour", 0] and rows["colour", 1] and all("candidate" in r for r in final.log
+                                                            if r["pass"] != "start")
+    assert rows["colour", 0] == [r["neg_log_posterior"] for r in one.log if r["pass"] == "colour"]
+    best = min((0, 1), key=lambda c: rows["colour", c][-1])
+    assert np.array_equal(final.psi, one.psi) == (best == 0)
+    with pytest.raises(ConfigError, match="candidate_choice"):
+        Config(candidate_choice="best")
 
 def grey_material_props(name):
     psi = model_data.shipped_model().library_material(name).psi

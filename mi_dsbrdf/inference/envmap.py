@@ -21,7 +21,9 @@ Start: chromaticity from the image's colour
 GMM means), a constant map at the image's level refined by a short grey
 illumination block and a short reflectance block; the best
 (``Config.start_candidates`` of them: each runs the grey pass, and the lowest
-posterior at its end goes on) starts the rounds (:func:`alternate`).
+posterior at its end goes on, or with ``Config.candidate_choice`` "final" each
+runs every pass and the lowest at the end is the answer) starts the rounds
+(:func:`alternate`).
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
 channels: the grey-world assumption; the lobes keep the image's colour), then
@@ -147,15 +149,21 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         found.append((value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK)))
     # sorted is stable: equal posteriors keep the starts' order
     candidates = sorted(found, key=lambda f: f[0])[:cfg.start_candidates]
-    # the grey pass from each candidate (one candidate: the start's choice stands)
-    first = posterior(sizes[1], passes[0])
-    ends = [alternate(first, passes[0], sizes[1], psi, logits, log_map, cfg, log,
-                      candidate=i if len(candidates) > 1 else None)
+    # the grey pass from each candidate (one candidate: the start's choice stands);
+    # the lowest posterior at its end continues, or with candidate_choice "final"
+    # each candidate runs every pass and the lowest at the end is the answer
+    tag = (lambda i: i) if len(candidates) > 1 else (lambda i: None)
+    run_through = passes if cfg.candidate_choice == "final" else passes[:1]
+
+    def run(state, names, candidate):
+        for pass_name in names:
+            size = sizes[1 + passes.index(pass_name)]
+            state = alternate(posterior(size, pass_name), pass_name, size, *state[:3], cfg, log,
+                              candidate=candidate)
+        return state
+    ends = [run((psi, logits, log_map), run_through, tag(i))
             for i, (_, psi, logits, log_map) in enumerate(candidates)]
-    psi, logits, log_map, seen, _ = min(ends, key=lambda e: e[4])
-    for pass_name, size in zip(passes[1:], sizes[2:]):
-        psi, logits, log_map, seen, _ = alternate(posterior(size, pass_name), pass_name, size, psi, logits,
-                                                  log_map, cfg, log)
+    psi, logits, log_map, seen, _ = run(min(ends, key=lambda e: e[4]), passes[len(run_through):], None)
     chroma = softmax_chroma(logits)
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map), 0.0), seen=seen,
