@@ -43,7 +43,6 @@ off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import glob
 import json
 import os
@@ -53,7 +52,6 @@ import sys
 import numpy as np
 
 from experiments import DATA, make_case, run_on_cluster
-from mi_dsbrdf.config import Config
 from mi_dsbrdf.model.build import GMM, gmm_structure
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -107,30 +105,21 @@ assert not set(VALIDATION_MATERIALS) & set(REPORT_MATERIALS)
 assert not set(VALIDATION_PROBES) & set(REPORT_PROBES)
 
 
-#: Config's fields, and those of them whose values are words, not numbers
-CONFIG_FIELDS = [f.name for f in dataclasses.fields(Config)]
-TEXT_FIELDS = {"candidate_choice"}
-
-
 def parse_config(items) -> dict:
     """``["w_entropy=300", "map_levels=1"]`` -> {"w_entropy": 300.0, "map_levels": 1}; the
     parts of a :func:`setting_name` (``["w_entropy300", "map_levels1"]``) read alike."""
     out = {}
     for item in items or []:
-        if "=" in item:
-            k, v = item.split("=", 1)
-        else:                     # a name's part: the longest Config field it starts with
-            k = max((f for f in CONFIG_FIELDS if item.startswith(f)), key=len, default=None)
-            k, v = ((k, item[len(k):]) if k is not None     # else a field of an older Config ("eps0.01")
-                    else re.fullmatch(r"(.*?)(-?[0-9.]+(?:e[-+]?[0-9]+)?)", item).groups())
-        out[k] = v if k in TEXT_FIELDS else int(v) if v.lstrip("-").isdigit() else float(v)
+        k, v = (item.split("=", 1) if "=" in item
+                else re.fullmatch(r"(.*?)(-?[0-9.]+(?:e[-+]?[0-9]+)?)", item).groups())
+        out[k] = int(v) if v.lstrip("-").isdigit() else float(v)
     return out
 
 
 def setting_name(config, gmm=None) -> str:
     """``w_gmm100-w_gradient30000``, with ``gmm-full-2-0.01-`` before it for a GMM
     structure other than the build's; ``defaults`` for neither."""
-    name = "-".join(("%s%s" if k in TEXT_FIELDS else "%s%g") % (k, v) for k, v in sorted(config.items()))
+    name = "-".join("%s%g" % (k, v) for k, v in sorted(config.items()))
     if gmm is not None:
         name = "-".join(["gmm"] + [str(p) for p in gmm_structure(gmm)] + ([name] if name else []))
     return name or "defaults"

@@ -20,8 +20,6 @@ from mi_dsbrdf.errors import ConfigError
 PRIOR_PIXELS = 3000
 #: the priors of Eq. 18 (and two of ours), each weighted by Config.w_<name>
 PRIOR_NAMES = ("gmm", "hue", "entropy", "gradient", "chromaticity", "light_colour")
-#: where the start's candidates are compared (``Config.candidate_choice``)
-CANDIDATE_CHOICES = ("grey", "final")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,13 +107,6 @@ class Config:
         noise of a rerun (0.531 against 0.534; it changes 25 of 60 cases, 13
         lower and 12 higher), at 1.25-1.49x the time side by side: 1 stays the
         default (README, Natural light, "The eleventh session")
-    candidate_choice : where the start's candidates are compared (with
-        ``start_candidates`` > 1): ``"grey"``, at the end of the grey pass (the
-        colour pass runs once, from the lowest), or ``"final"``, at the end of
-        the last pass (each candidate runs every pass: nearly ``start_candidates``
-        times the time). The grey pass holds the lobes at the image's colour and
-        the map grey, so under a coloured light its ranking can differ from the
-        final posterior's (README, Natural light, "The twelfth session")
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,
@@ -167,7 +158,6 @@ class Config:
     light_gmm_volume: float = 1.0
     map_levels: int = 2
     start_candidates: int = 1
-    candidate_choice: str = "grey"
     texel_samples: int = 2
     grey_texel_samples: int | None = 1
     reflectance_pairs: int = 500_000
@@ -188,9 +178,6 @@ class Config:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
-        if self.candidate_choice not in CANDIDATE_CHOICES:
-            raise ConfigError("candidate_choice must be one of %s, got %r"
-                              % (", ".join(CANDIDATE_CHOICES), self.candidate_choice))
         g = self.grey_texel_samples
         if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 1):
             raise ConfigError("grey_texel_samples must be None or an integer >= 1, got %r" % (g,))

@@ -223,9 +223,7 @@ def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     """``Config.start_candidates`` 2: the two best starts by their posterior each
     run the grey pass (rows tagged with the candidate); the first candidate's
     pass is the one-candidate run's, number for number, and the colour pass
-    continues from the candidate whose grey pass ended lowest; with
-    ``candidate_choice`` "final" each candidate runs both passes and the one
-    whose colour pass ended lowest is the answer."""
+    continues from the candidate whose grey pass ended lowest."""
     from mi_dsbrdf.inference.latlong import procedural_sky
     model = model_data.shipped_model()
     s = sphere({"type": "dsbrdf", "material": TRUTH})
@@ -247,21 +245,30 @@ def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     assert (colour == [r["neg_log_posterior"] for r in one.log if r["pass"] == "colour"]) == same
     with pytest.raises(ConfigError, match="start_candidates"):
         Config(start_candidates=0)
-    # candidate_choice "final": each candidate runs both passes (its rows tagged),
-    # the grey passes are those above, and the answer is the candidate whose
-    # colour pass ended lowest
-    final = recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model,
-                           dataclasses.replace(base, start_candidates=2, candidate_choice="final"))
-    rows = {(p, c): [r["neg_log_posterior"] for r in final.log if r["pass"] == p and r.get("candidate") == c]
-            for p in ("grey", "colour") for c in (0, 1)}
-    assert rows["grey", 0] == grey[0] and rows["grey", 1] == grey[1]
-    assert rows["colour", 0] and rows["colour", 1] and all("candidate" in r for r in final.log
-                                                            if r["pass"] != "start")
-    assert rows["colour", 0] == [r["neg_log_posterior"] for r in one.log if r["pass"] == "colour"]
-    best = min((0, 1), key=lambda c: rows["colour", c][-1])
-    assert np.array_equal(final.psi, one.psi) == (best == 0)
-    with pytest.raises(ConfigError, match="candidate_choice"):
-        Config(candidate_choice="best")
+
+def test_envmap_recovery_does_not_depend_on_the_images_units():
+    """The same image in other units (an exposure of 2^-40, or 3e9) gives the same
+    material and the map in those units: the map's log bounds and the black of
+    unseen texels are absolute constants, which the image times 2^20 once crossed
+    (psi moved by up to 10 at 1e-12, 0.3-1.2 at 1e-6 and 1e6)."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    img = img.reshape(RES, RES, 3)
+    cfg = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10, texel_samples=1)
+    one = recover_envmap(ts, img, ts.mask, model, cfg)
+    tiny = recover_envmap(ts, img * 2.0 ** -40, ts.mask, model, cfg)       # exact in binary: bit for bit
+    np.testing.assert_array_equal(tiny.psi, one.psi)
+    np.testing.assert_array_equal(tiny.illumination, one.illumination * 2.0 ** -40)
+    big = recover_envmap(ts, img * 3e9, ts.mask, model, cfg)
+    np.testing.assert_allclose(big.psi, one.psi, atol=1e-6)
+    np.testing.assert_allclose(big.illumination[one.seen], one.illumination[one.seen] * 3e9, rtol=1e-6)
+    with pytest.raises(InputError, match="mean"):
+        recover_envmap(ts, np.zeros_like(img), ts.mask, model, cfg)
+
 
 def grey_material_props(name):
     psi = model_data.shipped_model().library_material(name).psi

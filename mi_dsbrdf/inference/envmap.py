@@ -21,9 +21,7 @@ Start: chromaticity from the image's colour
 GMM means), a constant map at the image's level refined by a short grey
 illumination block and a short reflectance block; the best
 (``Config.start_candidates`` of them: each runs the grey pass, and the lowest
-posterior at its end goes on, or with ``Config.candidate_choice`` "final" each
-runs every pass and the lowest at the end is the answer) starts the rounds
-(:func:`alternate`).
+posterior at its end goes on) starts the rounds (:func:`alternate`).
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
 channels: the grey-world assumption; the lobes keep the image's colour), then
@@ -88,6 +86,13 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         material and the GMM's means); one start skips the choice among them
     """
     cfg = config or Config()
+    # the image's units: the method is invariant to them (light x material), this
+    # code's constants are not (the map's log bounds and the BLACK of unseen texels;
+    # L-BFGS-B's first step runs to those bounds), and the same image times 2^20
+    # came back with another material. Inference sees the image at a mean of one,
+    # and the map is scaled back at the end
+    exposure = image_level(observed, mask)
+    observed = np.asarray(observed, dtype=np.float64) / exposure
     passes = ["grey", "colour"] if colour else ["grey"]
     sizes = map_sizes(cfg.map_size, cfg.map_levels, len(passes))
     posteriors = {}
@@ -149,25 +154,29 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         found.append((value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK)))
     # sorted is stable: equal posteriors keep the starts' order
     candidates = sorted(found, key=lambda f: f[0])[:cfg.start_candidates]
-    # the grey pass from each candidate (one candidate: the start's choice stands);
-    # the lowest posterior at its end continues, or with candidate_choice "final"
-    # each candidate runs every pass and the lowest at the end is the answer
-    tag = (lambda i: i) if len(candidates) > 1 else (lambda i: None)
-    run_through = passes if cfg.candidate_choice == "final" else passes[:1]
-
-    def run(state, names, candidate):
-        for pass_name in names:
-            size = sizes[1 + passes.index(pass_name)]
-            state = alternate(posterior(size, pass_name), pass_name, size, *state[:3], cfg, log,
-                              candidate=candidate)
-        return state
-    ends = [run((psi, logits, log_map), run_through, tag(i))
+    # the grey pass from each candidate (one candidate: the start's choice stands)
+    first = posterior(sizes[1], passes[0])
+    ends = [alternate(first, passes[0], sizes[1], psi, logits, log_map, cfg, log,
+                      candidate=i if len(candidates) > 1 else None)
             for i, (_, psi, logits, log_map) in enumerate(candidates)]
-    psi, logits, log_map, seen, _ = run(min(ends, key=lambda e: e[4]), passes[len(run_through):], None)
+    psi, logits, log_map, seen, _ = min(ends, key=lambda e: e[4])
+    for pass_name, size in zip(passes[1:], sizes[2:]):
+        psi, logits, log_map, seen, _ = alternate(posterior(size, pass_name), pass_name, size, psi, logits,
+                                                  log_map, cfg, log)
     chroma = softmax_chroma(logits)
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
-                    chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map), 0.0), seen=seen,
-                    log=rows)
+                    chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
+                    seen=seen, log=rows)
+
+
+def image_level(observed, mask) -> float:
+    """The mean of the usable pixels (``mask`` (H, W)) of ``observed`` (H, W, C), over
+    channels: the image's units (InputError if not finite and > 0)."""
+    px = np.asarray(observed, dtype=np.float64)[np.asarray(mask, bool)]
+    level = float(px[..., :3].mean()) if px.size else 0.0
+    if not (np.isfinite(level) and level > 0):
+        raise InputError("the usable pixels' mean must be finite and > 0, got %r" % level)
+    return level
 
 
 def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=None) -> tuple:
