@@ -40,6 +40,7 @@ import numpy as np
 
 from experiments import CACHE, DATA
 from natural_light import HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN, ROOT, VALIDATION_MATERIALS, VALIDATION_PROBES
+from truth_posterior import validation_case
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "true_map_reflectance.json")
 #: reflectance blocks from each start under the true map
@@ -64,11 +65,8 @@ def near_lambertian(materials, data=DATA) -> list:
 
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
     """Recover one case and score the three points (see the module doc)."""
-    import drjit as dr
-    from mi_dsbrdf.app.io import read_image
     from mi_dsbrdf.backend import single_blas_thread
     from mi_dsbrdf.brdf.chromaticity import chroma_logits
-    from mi_dsbrdf.brdf.measured import MeasuredBRDF
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.evaluation import experiment as ex
     from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
@@ -76,16 +74,8 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     from mi_dsbrdf.inference.forward import apply_transport
     from mi_dsbrdf.inference.objective import Posterior
     from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
-    from mi_dsbrdf.model.samples import samples_from_table
-    dr.set_thread_count(1)
-    nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
-    model = ex.loo_model(material, cache)
-    samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, material))
+    model, samples, truth, img, ts = validation_case(material, probe, data, cache, map_size, res)
     H, W = map_size
-    truth = ex.downsample(read_image(os.path.join(data, "envmaps", probe)), 2 * H, 2 * W)
-    img = ex.render(ex.texels({"type": "merl", "nbrdf": nbrdf, "material": material}, res, (2 * H, 2 * W)),
-                    truth.reshape(-1, 3))
-    ts = ex.texels({"type": "dsbrdf"}, res, (H, W))
     cfg = Config(map_size=(H, W))
     rec = envmap.recover_envmap(ts, img, ts.mask, model, cfg)
     # the colour pass's posterior (its texel sampling and pixels), as recover_envmap builds it

@@ -46,20 +46,14 @@ DOC = os.path.join(DOCS, "truth_posterior.md")
 REFINE_ITERS = 300
 
 
-def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
-    """Recover one case and score both points (see the module doc)."""
+def validation_case(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> tuple:
+    """One case as ``natural_light.py`` makes it: (leave-one-out model, the measured
+    material's MERL samples, the probe at twice ``map_size``, the image (res, res, 3)
+    rendered from its texel centres, the ``dsbrdf`` view at ``map_size``)."""
     import drjit as dr
     from mi_dsbrdf.app.io import read_image
-    from mi_dsbrdf.backend import single_blas_thread
-    from mi_dsbrdf.brdf.chromaticity import chroma_logits
     from mi_dsbrdf.brdf.measured import MeasuredBRDF
-    from mi_dsbrdf.config import Config
     from mi_dsbrdf.evaluation import experiment as ex
-    from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
-    from mi_dsbrdf.inference import envmap
-    from mi_dsbrdf.inference.forward import apply_transport
-    from mi_dsbrdf.inference.objective import Posterior
-    from mi_dsbrdf.model.fitting import fit_basis
     from mi_dsbrdf.model.samples import samples_from_table
     dr.set_thread_count(1)
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
@@ -69,7 +63,22 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     truth = ex.downsample(read_image(os.path.join(data, "envmaps", probe)), 2 * H, 2 * W)
     img = ex.render(ex.texels({"type": "merl", "nbrdf": nbrdf, "material": material}, res, (2 * H, 2 * W)),
                     truth.reshape(-1, 3))
-    ts = ex.texels({"type": "dsbrdf"}, res, (H, W))
+    return model, samples, truth, img, ex.texels({"type": "dsbrdf"}, res, (H, W))
+
+
+def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
+    """Recover one case and score both points (see the module doc)."""
+    from mi_dsbrdf.backend import single_blas_thread
+    from mi_dsbrdf.brdf.chromaticity import chroma_logits
+    from mi_dsbrdf.config import Config
+    from mi_dsbrdf.evaluation import experiment as ex
+    from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
+    from mi_dsbrdf.inference import envmap
+    from mi_dsbrdf.inference.forward import apply_transport
+    from mi_dsbrdf.inference.objective import Posterior
+    from mi_dsbrdf.model.fitting import fit_basis
+    model, samples, truth, img, ts = validation_case(material, probe, data, cache, map_size, res)
+    H, W = map_size
     cfg = Config(map_size=(H, W))
     rec = envmap.recover_envmap(ts, img, ts.mask, model, cfg)
     post = Posterior(ts, img, ts.mask, model, cfg)

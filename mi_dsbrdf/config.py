@@ -57,7 +57,8 @@ class Config:
         side is per lobe and counts a tint the lobes share once per lobe:
         1/3 (one count over three lobes) with the light's at 1 is the
         validation choice of the tenth session (``--choose-gmm`` against the
-        shipped code rerun the same day; README, Natural light; 0 and 0: off,
+        shipped code rerun the same day; docs/natural_light_history.md, "The tenth
+        session"; 0 and 0: off,
         the code before)
     light_temperature_sigma, light_tint_sigma : spreads of the light-colour
         prior along its colour temperature (blue-orange) and its tint
@@ -106,7 +107,7 @@ class Config:
         choice on validation in the eleventh session, by a score within the
         noise of a rerun (0.531 against 0.534; it changes 25 of 60 cases, 13
         lower and 12 higher), at 1.25-1.49x the time side by side: 1 stays the
-        default (README, Natural light, "The eleventh session")
+        default (README, Natural light, "Options that are not the default")
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,
@@ -124,7 +125,7 @@ class Config:
         --speed``, 128x128, side by side). Against a validation truth
         integrated over each texel (not the texel centres it was chosen on,
         which favour 2 x 2 by construction) it is level with the code before
-        (1 throughout, ``gmm_volume`` 1; README, Natural light). 2 throughout
+        (1 throughout, ``gmm_volume`` 1; docs/natural_light_history.md). 2 throughout
         won on the first validation set but lost on the report set (mildly
         glossy materials took a spurious sharp highlight;
         ``natural_light.OVERRULED``)

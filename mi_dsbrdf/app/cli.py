@@ -129,7 +129,7 @@ def _config_arguments(p, preset):
     p.add_argument("--no-colour-split", action="store_true",
                    help="under a map, leave the image's colour in the material (the grey-world start) instead "
                         "of splitting it between light and material by a prior on each (the default; see the "
-                        "README, The colour split)")
+                        "README, Natural light, The colour split)")
 
 
 def main(argv=None):

@@ -44,7 +44,7 @@ DEFAULT_K = 10
 SEED = 0
 #: the GMM prior's structure (:func:`gmm_structure`): "bic", or
 #: "covariance:components:reg". Four diagonal components, the natural-light
-#: validation set's choice (README, *A bound on each lobe's energy, and the
+#: validation set's choice (docs/natural_light_history.md, *A bound on each lobe's energy, and the
 #: GMM's structure again*; BIC's four full ones left near-Lambertian materials glossy)
 GMM = "diag:4:0.001"
 
