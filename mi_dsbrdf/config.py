@@ -107,7 +107,8 @@ class Config:
         choice on validation in the eleventh session, by a score within the
         noise of a rerun (0.531 against 0.534; it changes 25 of 60 cases, 13
         lower and 12 higher), at 1.25-1.49x the time side by side: 1 stays the
-        default (README, Natural light, "Options that are not the default")
+        default (the rule's time guard bars it; README, Natural light,
+        "Options that are not the default")
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,

@@ -246,6 +246,7 @@ def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     with pytest.raises(ConfigError, match="start_candidates"):
         Config(start_candidates=0)
 
+
 def test_envmap_recovery_does_not_depend_on_the_images_units():
     """The same image in other units (an exposure of 2^-40, or 3e9) gives the same
     material and the map in those units: the map's log bounds and the black of

@@ -15,6 +15,10 @@ alternating two blocks:
   illumination fixed, Levenberg-Marquardt on psi, the chromaticity variables
   and the map's overall log scale.
 
+Units: inference sees the image divided by its usable pixels' mean
+(:func:`image_level`) and scales the map back, so that the answer does not
+depend on the image's units (the map's log bounds and ``BLACK`` are constants).
+
 Start: chromaticity from the image's colour
 (:func:`~mi_dsbrdf.inference.reflectance.image_chroma_logits`) and, for each of
 :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (psi = 0 and the
