@@ -31,16 +31,14 @@ markdown table.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
 from experiments import CACHE, DATA
 from natural_light import HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN, ROOT, VALIDATION_MATERIALS, VALIDATION_PROBES
-from truth_posterior import validation_case
+from truth_posterior import run_saved, validation_case
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "true_map_reflectance.json")
 #: reflectance blocks from each start under the true map
@@ -124,10 +122,6 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
             "recovered": recovered, "true_map": true_map, "best_map": best_map}
 
 
-def _run(args):
-    return run(*args)
-
-
 def table(rows) -> str:
     """Markdown: per case and point, the posterior's main terms, Eq. 20 (paper), the
     highlight ratio and the mean |log| error of the brighter three quartiles."""
@@ -160,23 +154,12 @@ def main(argv=None):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
     materials = args.materials or near_lambertian(VALIDATION_MATERIALS)
     rows = []
-    if os.path.exists(OUT):
-        with open(OUT) as f:
-            rows = json.load(f)
-    done = {(r["material"], r["probe"]) for r in rows}
-    jobs = [(m, p) for p in args.probes for m in materials if (m, p) not in done]
-    with ProcessPoolExecutor(args.workers) as pool:      # processes: Dr.Jit in two threads can crash
-        for i, r in enumerate(pool.map(_run, jobs), 1):
-            rows.append(r)
-            tmp = OUT + ".tmp"
-            with open(tmp, "w") as f:
-                json.dump(rows, f, indent=1)
-            os.replace(tmp, OUT)
-            print("[%d/%d] %-20s %-28s highlight recovered %.2f, true map %.2f (measured %.2f) | -log posterior "
-                  "recovered %.0f, true map's material at its best map %.0f" % (
-                      i, len(jobs), r["material"], os.path.basename(r["probe"]), r["recovered"]["highlight_ratio"],
-                      r["true_map"]["highlight_ratio"], r["truth_highlight_ratio"],
-                      r["recovered"]["neg_log_posterior"], r["best_map"]["neg_log_posterior"]), flush=True)
+    for i, n, r in run_saved(run, OUT, materials, args.probes, args.workers, rows):
+        print("[%d/%d] %-20s %-28s highlight recovered %.2f, true map %.2f (measured %.2f) | -log posterior "
+              "recovered %.0f, true map's material at its best map %.0f" % (
+                  i, n, r["material"], os.path.basename(r["probe"]), r["recovered"]["highlight_ratio"],
+                  r["true_map"]["highlight_ratio"], r["truth_highlight_ratio"],
+                  r["recovered"]["neg_log_posterior"], r["best_map"]["neg_log_posterior"]), flush=True)
     print(table(rows))
 
 

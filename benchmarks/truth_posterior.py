@@ -112,8 +112,26 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
             "recovered": recovered, "truth_fit": fitted}
 
 
-def _run(args):
-    return run(*args)
+def run_saved(fn, path, materials, probes, workers, rows):
+    """Run ``fn(material, probe)`` on every pair not yet in the JSON list at ``path``,
+    in ``workers`` processes (Dr.Jit in two threads of one process can crash),
+    appending each result to ``rows`` (first the stored ones) and rewriting the file
+    whole as each ends. Yields (i, how many run, result)."""
+    if os.path.exists(path):
+        with open(path) as f:
+            rows.extend(json.load(f))
+    done = {(r["material"], r["probe"]) for r in rows}
+    jobs = [(m, p) for p in probes for m in materials if (m, p) not in done]
+    if not jobs:
+        return
+    with ProcessPoolExecutor(workers) as pool:
+        for i, r in enumerate(pool.map(fn, *zip(*jobs)), 1):
+            rows.append(r)
+            tmp = path + ".tmp"
+            with open(tmp, "w") as f:
+                json.dump(rows, f, indent=1)
+            os.replace(tmp, path)
+            yield i, len(jobs), r
 
 
 def report(rows) -> str:
@@ -166,23 +184,12 @@ def main(argv=None):
     if not os.path.exists(os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
     rows = []
-    if os.path.exists(OUT):
-        with open(OUT) as f:
-            rows = json.load(f)
-    done = {(r["material"], r["probe"]) for r in rows}
-    jobs = [(m, p) for p in args.probes for m in args.materials if (m, p) not in done]
-    with ProcessPoolExecutor(args.workers) as pool:      # processes: Dr.Jit in two threads can crash
-        for i, r in enumerate(pool.map(_run, jobs), 1):
-            rows.append(r)
-            tmp = OUT + ".tmp"
-            with open(tmp, "w") as f:
-                json.dump(rows, f, indent=1)
-            os.replace(tmp, OUT)
-            a, b = r["recovered"], r["truth_fit"]
-            print("[%d/%d] %-24s %-28s -log posterior recovered %8.0f truth fit %8.0f | likelihood %7.0f %7.0f"
-                  " | Eq. 20 %.3f %.3f" % (i, len(jobs), r["material"], os.path.basename(r["probe"]),
-                                          a["neg_log_posterior"], b["neg_log_posterior"], a["likelihood"],
-                                          b["likelihood"], a["brdf_eq20_paper"], b["brdf_eq20_paper"]), flush=True)
+    for i, n, r in run_saved(run, OUT, args.materials, args.probes, args.workers, rows):
+        a, b = r["recovered"], r["truth_fit"]
+        print("[%d/%d] %-24s %-28s -log posterior recovered %8.0f truth fit %8.0f | likelihood %7.0f %7.0f"
+              " | Eq. 20 %.3f %.3f" % (i, n, r["material"], os.path.basename(r["probe"]),
+                                      a["neg_log_posterior"], b["neg_log_posterior"], a["likelihood"],
+                                      b["likelihood"], a["brdf_eq20_paper"], b["brdf_eq20_paper"]), flush=True)
     print(report(rows))
 
 
