@@ -154,7 +154,7 @@ def main(argv=None):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
     materials = args.materials or near_lambertian(VALIDATION_MATERIALS)
     rows = []
-    for i, n, r in run_saved(run, OUT, materials, args.probes, args.workers, rows):
+    for i, n, r in run_saved(run, OUT, [(m, p) for p in args.probes for m in materials], args.workers, rows):
         print("[%d/%d] %-20s %-28s highlight recovered %.2f, true map %.2f (measured %.2f) | -log posterior "
               "recovered %.0f, true map's material at its best map %.0f" % (
                   i, n, r["material"], os.path.basename(r["probe"]), r["recovered"]["highlight_ratio"],

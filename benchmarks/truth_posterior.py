@@ -112,8 +112,8 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
             "recovered": recovered, "truth_fit": fitted}
 
 
-def run_saved(fn, path, materials, probes, workers, rows):
-    """Run ``fn(material, probe)`` on every pair not yet in the JSON list at ``path``,
+def run_saved(fn, path, pairs, workers, rows):
+    """Run ``fn(material, probe)`` on every (material, probe) of ``pairs`` not yet in the JSON list at ``path``,
     in ``workers`` processes (Dr.Jit in two threads of one process can crash),
     appending each result to ``rows`` (first the stored ones) and rewriting the file
     whole as each ends. Yields (i, how many run, result)."""
@@ -121,7 +121,7 @@ def run_saved(fn, path, materials, probes, workers, rows):
         with open(path) as f:
             rows.extend(json.load(f))
     done = {(r["material"], r["probe"]) for r in rows}
-    jobs = [(m, p) for p in probes for m in materials if (m, p) not in done]
+    jobs = [(m, p) for m, p in pairs if (m, p) not in done]
     if not jobs:
         return
     with ProcessPoolExecutor(workers) as pool:
@@ -184,7 +184,7 @@ def main(argv=None):
     if not os.path.exists(os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
     rows = []
-    for i, n, r in run_saved(run, OUT, args.materials, args.probes, args.workers, rows):
+    for i, n, r in run_saved(run, OUT, [(m, p) for p in args.probes for m in args.materials], args.workers, rows):
         a, b = r["recovered"], r["truth_fit"]
         print("[%d/%d] %-24s %-28s -log posterior recovered %8.0f truth fit %8.0f | likelihood %7.0f %7.0f"
               " | Eq. 20 %.3f %.3f" % (i, n, r["material"], os.path.basename(r["probe"]),
