@@ -12,6 +12,8 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's),
      "truth_samples": directions per texel side of the probe's truth render (optional, default 1:
      the texel centres; the probe's map integrated over each texel's footprint as s x s directions),
+     "exposure": the rendered image's factor (optional, probes, default 1: the result must not
+     depend on it; another exposure reruns the case with only rounding changed),
      "start": index into :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (optional,
      probes: run from that start alone, a diagnostic of the choice among them)}
 
@@ -222,7 +224,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         probe = read_image(os.path.join(data, "envmaps", case["probe"]))
         truth = downsample(probe, 2 * H, 2 * W)
         ts = texels(merl, res, (2 * H, 2 * W), shape=shape, samples=case.get("truth_samples", 1))
-        img = render(ts, truth.reshape(-1, 3))
+        img = render(ts, truth.reshape(-1, 3)) * case.get("exposure", 1.0)
         if method == "mean-constant":
             # doing nothing: the model's mean material (psi = 0) under a constant map
             out["seconds"] = 0.0
