@@ -73,22 +73,6 @@ def test_gradient_prior_is_lat_long_aware():
         GradientPrior(alpha=1.5)
 
 
-def test_gradient_prior_over_seen_texels_ignores_the_unseen_ones():
-    """Unseen texels are not estimated: their values, and the steps from a seen
-    texel to them, cost nothing; the masked gradient matches finite differences."""
-    p = GradientPrior(weight=0.5, alpha=0.6)
-    x = lat_long_map()
-    seen = np.random.default_rng(3).random(x.shape[:2]) > 0.3
-    v, g = p(x, seen)
-    other = np.where(seen[..., None], x, -30.0)
-    assert p(other, seen)[0] == pytest.approx(v, rel=1e-12)     # unseen values do not count
-    assert p(other)[0] > 2 * v                                   # without the mask the cliffs dominate
-    np.testing.assert_array_equal(g[~seen], 0.0)
-    np.testing.assert_allclose(g, finite_differences(lambda y: p(y, seen)[0], x), rtol=1e-4, atol=1e-8)
-    # all seen: the unmasked prior
-    assert p(x, np.ones_like(seen))[0] == pytest.approx(p(x)[0], rel=1e-12)
-
-
 def test_entropy_prior_prefers_peaky_illumination_and_ignores_scale():
     e = EntropyPrior()
     rng = np.random.default_rng(2)

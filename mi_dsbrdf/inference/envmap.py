@@ -282,7 +282,7 @@ def posterior_at(post, psi, logits, log_map, T, seen, bins) -> tuple:
     """(negative log posterior, likelihood, prior terms) of the whole image at a
     material whose transport is ``T`` and the log map (unseen texels black)."""
     lik = post.map_likelihood(log_map, T, seen, grad=False)[0]
-    terms = post.prior_terms(psi, logits, log_map, bins, seen)
+    terms = post.prior_terms(psi, logits, log_map, bins)
     return lik + sum(terms.values()), lik, terms
 
 

@@ -91,12 +91,6 @@ class GradientPrior:
     solid angle. eps keeps the gradient finite at the kink |grad x| = 0, and
     sets how stiff the prior is where the map is flat (its curvature there grows
     as eps^(alpha - 2)); inference takes it from ``Config.gradient_eps``.
-
-    Given ``seen`` (H, W), the prior is over the seen texels only: a difference
-    counts when both its texels are seen, and only seen texels weigh. Unseen
-    texels are not estimated (inference holds them black), so a step from a
-    seen texel down to one would price the image's level against an arbitrary
-    constant and pull the seen rim of the map (grazing directions) down.
     """
 
     def __init__(self, weight=1.0, alpha=0.5, eps=1e-2):
@@ -118,18 +112,11 @@ class GradientPrior:
         dth[:-1] = x[1:] - x[:-1]                                  # no neighbour past the poles
         return dphi, dth, inv_s
 
-    def __call__(self, log_map, seen=None):
-        """(weight * value, gradient (H, W, C)) of an (H, W, C) log map; ``seen``
-        (H, W) bool restricts the prior to the seen texels (default: all)."""
+    def __call__(self, log_map):
         dphi, dth, inv_s = self.differences(log_map)
         H_, W_, _ = dphi.shape
-        w = _texel_weights(H_, W_)
-        if seen is not None:
-            seen = np.asarray(seen, dtype=bool)
-            dphi = dphi * (seen & np.roll(seen, -1, axis=1))[..., None]
-            dth[:-1] *= (seen[1:] & seen[:-1])[..., None]
-            w = w * seen
         m2 = (dphi ** 2 + dth ** 2).sum(axis=2) + self.eps ** 2    # (H, W)
+        w = _texel_weights(H_, W_)
         val = float((w * m2 ** (self.alpha / 2)).sum())
         c = (w * self.alpha * m2 ** (self.alpha / 2 - 1))[..., None]   # d val / d (m2) * 2 / 2
         gphi = c * dphi * inv_s

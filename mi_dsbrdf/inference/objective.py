@@ -161,11 +161,10 @@ class Posterior:
         return self.view.transport(self.material(psi, logits))
 
 
-    def prior_terms(self, psi, logits, log_map=None, bins=None, seen=None) -> dict:
+    def prior_terms(self, psi, logits, log_map=None, bins=None) -> dict:
         """The weighted prior terms one by one, for the log: the curve penalty, GMM
         (Eq. 6), hue (Eq. 12), chromaticity (if weighted) and, given a map,
-        entropy (Eq. 13-15), gradient (Eq. 16, over the ``seen`` (H, W) texels)
-        and light colour (if weighted)."""
+        entropy (Eq. 13-15), gradient (Eq. 16) and light colour (if weighted)."""
         terms = {"curve_penalty": self.curve_penalty(psi)[0]}
         if self.model.gmm is not None:
             terms["gmm"] = self.gmm_prior(psi)[0]
@@ -176,7 +175,7 @@ class Posterior:
             terms["chromaticity"] = self.w["chromaticity"] * self.model.chromaticity_prior.nll(chroma)
         if log_map is not None:
             terms["entropy"] = self.entropy(log_map, bins)[0]
-            terms["gradient"] = self.gradient(log_map, seen)[0]
+            terms["gradient"] = self.gradient(log_map)[0]
             if self.w["light_colour"] > 0:
                 terms["light_colour"] = self.light_colour(log_map)[0]
         return {k: float(v) for k, v in terms.items()}
@@ -248,10 +247,10 @@ class Posterior:
 
     def illumination_terms(self, log_map, T, seen, bins) -> tuple:
         """(value, d/d log_map, likelihood) of likelihood + entropy + gradient (+ light
-        colour) priors at fixed reflectance, over the ``seen`` (H, W) texels."""
+        colour) priors at fixed reflectance."""
         lik, g = self.map_likelihood(log_map, T, seen)
         e, ge = self.entropy(log_map, bins)
-        s, gs = self.gradient(log_map, seen)
+        s, gs = self.gradient(log_map)
         value, grad = lik + e + s, g + ge + gs
         if self.w["light_colour"] > 0:
             c, gc = self.light_colour(log_map)
