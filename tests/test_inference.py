@@ -11,7 +11,6 @@ from mi_dsbrdf.inference import recover_envmap, recover_light
 from mi_dsbrdf.inference.objective import direction_from_angles
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.model import model_file as model_data
-from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.app.scenes import sphere_scene
 
@@ -312,7 +311,6 @@ def test_an_orange_light_goes_into_the_map_not_the_material():
     """A grey material under an orange sky: with the colour-split priors the
     recovered map is orange and the lobes near grey; without them the image's
     colour stays in the material (its start)."""
-    from mi_dsbrdf.brdf.chromaticity import softmax_chroma
     from mi_dsbrdf.inference.latlong import procedural_sky
     sky = procedural_sky(8, 16).astype(np.float64) * np.array([1.0, 0.6, 0.3])
     img = image_under(grey_material_props("pvc"), sky)

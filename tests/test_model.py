@@ -180,7 +180,6 @@ def test_shipped_library_matches_the_measurements(nbrdf_file):
 
 def test_a_model_built_in_memory_drives_the_plugin_and_inference():
     """No file needed: the plugin's ``model`` parameter names an in-memory model by its source."""
-    import mitsuba as mi
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.inference.forward import TexelSum
     from mi_dsbrdf.inference.objective import Posterior

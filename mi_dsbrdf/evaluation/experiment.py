@@ -64,7 +64,6 @@ import numpy as np
 
 from mi_dsbrdf.app.io import read_image
 from mi_dsbrdf.app.scenes import camera, shape_dict
-from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
