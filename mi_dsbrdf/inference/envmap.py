@@ -333,9 +333,6 @@ def illumination_block(post, log_map, T, seen, bins, grey, iters) -> np.ndarray:
 
     x0 = log_map.reshape(-1, 3)[idx]
     v0 = x0.mean(axis=1) if grey else x0.reshape(-1)
-    # no lower bound: with every variable boxed L-BFGS-B's first step runs to the box
-    # (its length the distance to a bound), without it the first step is normalised;
-    # a texel that goes below BLACK + 1 is black, and clipped there after the block
     res = minimize(fun, v0, jac=True, method="L-BFGS-B", options={"maxiter": iters, "maxfun": 2 * iters},
-                   bounds=[(None, LOG_MAX)] * v0.size)
-    return unpack(np.maximum(res.x, BLACK + 1))
+                   bounds=[(BLACK + 1, LOG_MAX)] * v0.size)
+    return unpack(res.x)
