@@ -314,6 +314,19 @@ def test_natural_light_against_table_and_what_the_report_set_refuses(tmp_path):
             natural_light.main(["--set", "report"] + bad)
 
 
+def test_natural_light_exposure_reruns_the_same_cases_with_only_the_image_scaled():
+    """--exposure E: the same cases with the image times E (the case field
+    "exposure", left out at 1); E must be finite and > 0."""
+    import natural_light
+    plain, scaled = natural_light.cases("report"), natural_light.cases("report", exposure=1.7)
+    assert all("exposure" not in c for c in plain)
+    assert [c["exposure"] for c in scaled] == [1.7] * len(plain)
+    assert [dict(c, exposure=None) for c in scaled] == [dict(c, exposure=None) for c in plain]
+    for bad in ("0", "-1", "nan", "inf"):
+        with pytest.raises(SystemExit, match="--exposure must be a finite number > 0"):
+            natural_light.main(["--set", "validation", "--exposure", bad])
+
+
 def test_natural_light_choose_never_picks_an_overruled_setting(tmp_path):
     """A setting holding a value of natural_light.OVERRULED is scored and listed
     but not chosen, even with the lowest score; the next best is."""
