@@ -8,7 +8,9 @@ This script recovers each case at the exposures in ``EXPOSURES`` and prints,
 per case, each run's BRDF error (Eq. 20, both conventions), the map's error
 (log(1 + L) after the best scale, against the probe on the seen texels), the
 final negative log posterior, and how far ψ moved; then the spread over the
-cases: the largest over smallest of each error within a case.
+cases (the largest over smallest of each error and of the posterior within a
+case), and, where the runs' posteriors differ, whether the lowest posterior
+goes with the lowest error.
 
 It measures the noise floor of every comparison of two settings: a change to
 the code moves the optimiser's path at least as much as a rounding does, so a
@@ -72,6 +74,22 @@ def psi_move(row) -> float:
     return float(np.linalg.norm(p[1:] - p[0], axis=1).max())
 
 
+def lowest_posterior_ranks(rows, key, posterior_gap=0.005, error_gap=0.02) -> tuple:
+    """(cases where the run with the lowest final posterior has the lowest ``key``,
+    cases where it has a lower ``key`` than the run with the highest posterior,
+    cases counted): only cases whose runs' posteriors differ by more than
+    ``posterior_gap`` and whose ``key`` differs by more than ``error_gap`` (relative)."""
+    lowest = lower = n = 0
+    for r in rows:
+        if spread(r, "neg_log_posterior") - 1 > posterior_gap and spread(r, key) - 1 > error_gap:
+            best = min(r["runs"], key=lambda run: run["neg_log_posterior"])
+            worst = max(r["runs"], key=lambda run: run["neg_log_posterior"])
+            n += 1
+            lowest += best[key] == min(run[key] for run in r["runs"])
+            lower += best[key] < worst[key]
+    return lowest, lower, n
+
+
 def report(rows) -> str:
     md = ["| case | " + " | ".join("%s at %s" % (k, ", ".join("%g" % e for e in EXPOSURES)) for k in MEASURES)
           + " | -log posterior | ψ moved |", "|---|" + "---|" * (len(MEASURES) + 2)]
@@ -81,9 +99,13 @@ def report(rows) -> str:
         md.append("| %s × %s | %s | %s | %.2f |" % (r["material"], os.path.basename(r["probe"]), " | ".join(cells),
                                                    post, psi_move(r)))
     md += ["", "Over %d cases, largest / smallest within a case: median, 90th percentile, max" % len(rows), ""]
-    for k in MEASURES:
+    for k in MEASURES + ("neg_log_posterior",):
         s = np.array([spread(r, k) for r in rows])
         md.append("- %s: %.3f, %.3f, %.3f" % (k, np.median(s), np.percentile(s, 90), s.max()))
+    md += ["", "Where the runs' final posteriors differ by more than 0.5 % and an error by more than 2 %, "
+           "the run with the lowest posterior has the lowest error / a lower error than the run with the "
+           "highest posterior in:", ""]
+    md += ["- %s: %d / %d of %d" % ((k,) + lowest_posterior_ranks(rows, k)) for k in MEASURES]
     return "\n".join(md) + "\n"
 
 
