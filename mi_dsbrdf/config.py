@@ -94,10 +94,6 @@ class Config:
         beat the mean material in 32 of 40 cases against 34, median ratio 0.75
         against 0.61, and was lower case by case in 12 of 40. A point light sees
         a narrow band of theta_d, and the prior carries more of the answer there
-    gmm_dof : the degrees of freedom of a heavier tail on the GMM prior under a
-        map (:class:`~mi_dsbrdf.model.priors.GaussianMixture`; not in the paper):
-        the same pull near a component, a logarithmic cost far from every one.
-        ``inf`` is Eq. 6's Gaussian
     map_levels : the start runs on ``map_size`` halved ``map_levels - 1`` times,
         the passes on ``map_size`` (:func:`mi_dsbrdf.inference.envmap.map_sizes`)
     start_candidates : how many of the reflectance starts, the best by their
@@ -162,7 +158,6 @@ class Config:
     gradient_alpha: float = 0.5
     gmm_volume: float = 0.0
     light_gmm_volume: float = 1.0
-    gmm_dof: float = math.inf
     map_levels: int = 2
     start_candidates: int = 1
     texel_samples: int = 2
@@ -195,10 +190,6 @@ class Config:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1):
                 raise ConfigError("%s must be a number from 0 to 1, got %r" % (name, value))
-        if not (isinstance(self.gmm_dof, (int, float)) and not isinstance(self.gmm_dof, bool)
-                and self.gmm_dof > 0):
-            raise ConfigError("gmm_dof must be a number > 0 (inf: the Gaussian of Eq. 6), got %r"
-                              % (self.gmm_dof,))
         for name in ("tol", "likelihood_scale", "gradient_eps", "light_temperature_sigma",
                      "light_tint_sigma"):
             value = getattr(self, name)

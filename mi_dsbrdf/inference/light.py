@@ -13,7 +13,6 @@ rounds of the reflectance block with the light refined jointly.
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -120,7 +119,7 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     # the light is white by assumption (its colour is the material's): the priors that
     # split the image's colour between material and light are a map's
     post = Posterior(texels, observed, mask, model, cfg.with_colour_split(False), point=point,
-                     gmm_volume=cfg.light_gmm_volume, gmm_dof=math.inf)
+                     gmm_volume=cfg.light_gmm_volume)
     logits = image_chroma_logits(post.observed, post.keep, post.R)
     psi = np.zeros(post.k)
     t0 = time.perf_counter()

@@ -88,15 +88,12 @@ class Posterior:
     gmm_volume : the fraction of the GMM's volume terms the prior keeps (default
         ``config.gmm_volume``, the choice under a map; a light's inference passes
         ``config.light_gmm_volume``)
-    gmm_dof : the GMM's tail (default ``config.gmm_dof``, the choice under a map;
-        a light's inference passes ``math.inf``, Eq. 6)
     """
 
     def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None, max_pixels=None,
-                 gmm_volume=None, gmm_dof=None):
+                 gmm_volume=None):
         self.model, self.cfg, self.point = model, config, point
         self.gmm_volume = config.gmm_volume if gmm_volume is None else gmm_volume
-        self.gmm_dof = config.gmm_dof if gmm_dof is None else gmm_dof
         obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
         self.offset = LOG_OFFSET * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
@@ -196,9 +193,8 @@ class Posterior:
         """(value, gradient, Gauss-Newton Hessian) of the weighted GMM prior (Eq. 6,
         with or without its components' volume terms: ``gmm_volume``).
         The model must have a GMM."""
-        gmm, w, vol, dof = self.model.gmm, self.w["gmm"], self.gmm_volume, self.gmm_dof
-        return (w * gmm.nll(psi, vol, dof), w * gmm.grad(psi, vol, dof),
-                w * gmm.dominant_precision(psi, vol, dof))
+        gmm, w, vol = self.model.gmm, self.w["gmm"], self.gmm_volume
+        return w * gmm.nll(psi, vol), w * gmm.grad(psi, vol), w * gmm.dominant_precision(psi, vol)
 
     def curve_penalty(self, psi) -> tuple:
         """(value, gradient, Gauss-Newton Hessian) of CURVE_PENALTY * sum of the squared

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 from scipy.optimize import brentq
-from scipy.special import gammaln, i0e, i1e, logsumexp
+from scipy.special import i0e, i1e, logsumexp
 
 # --- Gaussian mixture on psi (Eq. 6) -----------------------------------------------
 
@@ -74,52 +74,33 @@ class GaussianMixture:
     def dim(self) -> int:
         return self.means.shape[1]
 
-    def _component_logs(self, x, volume=1.0, dof=math.inf):
-        """(M, C) log w_c + volume terms - the components' quadratics, and (M, C, k)
-        their gradients by x: u Sigma_c^-1 (x - mu_c), u = 1 for the Gaussian and
-        1 / (1 + d^2 / (nu + k)) for a Student-t tail."""
+    def _component_logs(self, x, volume=1.0):
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         diff = x[:, None, :] - self.means[None]                              # (M, C, k)
         sol = np.einsum("cij,mcj->mci", self._prec, diff)
-        d2 = np.einsum("mci,mci->mc", diff, sol)
         log_w = np.log(np.maximum(self.weights, 1e-300))
-        log_norm = self._log_norm
-        if math.isinf(dof):
-            quad, u = 0.5 * d2, np.ones_like(d2)
-        else:
-            nk = dof + self.dim
-            quad, u = 0.5 * nk * np.log1p(d2 / nk), 1.0 / (1.0 + d2 / nk)
-            # the Student-t of scale Sigma (nu + k) / nu: log Gamma((nu + k) / 2) - log Gamma(nu / 2)
-            # - k / 2 log(pi (nu + k)) in place of the Gaussian's -k / 2 log(2 pi)
-            log_norm = log_norm + (0.5 * self.dim * math.log(2 / nk) + gammaln(0.5 * nk) - gammaln(0.5 * dof))
-        norm = log_w + float(volume) * (log_norm - log_w)
-        return norm[None] - quad, u[:, :, None] * sol
+        norm = log_w + float(volume) * (self._log_norm - log_w)
+        return norm[None] - 0.5 * np.einsum("mci,mci->mc", diff, sol), sol
 
-    def dominant_precision(self, psi, volume=1.0, dof=math.inf) -> np.ndarray:
-        """(k, k) inverse covariance of the component most responsible for ``psi``
-        (times u, :meth:`_component_logs`, with a heavier tail): the Gauss-Newton
-        Hessian of -log p near psi (the reflectance block adds it)."""
-        psi = np.asarray(psi, dtype=np.float64).reshape(1, -1)
-        lc, _ = self._component_logs(psi, volume, dof)
-        c = int(np.argmax(lc[0]))
-        if math.isinf(dof):
-            return self._prec[c]
-        d = psi[0] - self.means[c]
-        return self._prec[c] / (1.0 + float(d @ self._prec[c] @ d) / (dof + self.dim))
+    def dominant_precision(self, psi, volume=1.0) -> np.ndarray:
+        """(k, k) inverse covariance of the component most responsible for ``psi``:
+        the Gauss-Newton Hessian of -log p near psi (the reflectance block adds it)."""
+        lc, _ = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1), volume)
+        return self._prec[int(np.argmax(lc[0]))]
 
-    def log_density(self, x, volume=1.0, dof=math.inf) -> np.ndarray:
+    def log_density(self, x, volume=1.0) -> np.ndarray:
         """log p(psi) for psi of shape (k,) (returns a float) or (M, k) (returns (M,))."""
-        lc, _ = self._component_logs(x, volume, dof)
+        lc, _ = self._component_logs(x, volume)
         out = logsumexp(lc, axis=1)
         return float(out[0]) if np.ndim(x) == 1 else out
 
-    def nll(self, psi, volume=1.0, dof=math.inf) -> float:
+    def nll(self, psi, volume=1.0) -> float:
         """-log p(psi) (Eq. 6), exact with its normalisation at ``volume`` 1."""
-        return -self.log_density(np.asarray(psi, dtype=np.float64).reshape(-1), volume, dof)
+        return -self.log_density(np.asarray(psi, dtype=np.float64).reshape(-1), volume)
 
-    def grad(self, psi, volume=1.0, dof=math.inf) -> np.ndarray:
-        """d(-log p)/d psi = sum_c resp_c u_c Sigma_c^-1 (psi - mu_c), shape (k,)."""
-        lc, sol = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1), volume, dof)
+    def grad(self, psi, volume=1.0) -> np.ndarray:
+        """d(-log p)/d psi = sum_c resp_c Sigma_c^-1 (psi - mu_c), shape (k,)."""
+        lc, sol = self._component_logs(np.asarray(psi, dtype=np.float64).reshape(1, -1), volume)
         resp = np.exp(lc - logsumexp(lc, axis=1, keepdims=True))
         return (resp[:, :, None] * sol).sum(axis=1)[0]
 
