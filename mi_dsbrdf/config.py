@@ -35,6 +35,9 @@ class Config:
         product with the transport: cheap)
     likelihood_scale : Laplacian scale b of Eq. 19 in log units (the expected
         |log error| of a pixel)
+    log_offset : the offset e of the likelihood's log(I + e), as a fraction of
+        the image's mean usable pixel: keeps the log finite for black pixels
+        and bounds the weight of dark, noisy ones
     w_gmm, w_hue, w_entropy, w_gradient : prior weights (lambda of Eq. 18) at
         PRIOR_PIXELS observed pixels, chosen on validation materials and probes
         against doing nothing in BRDF, illumination and relit error by
@@ -146,6 +149,7 @@ class Config:
     block_iters: int = 15
     illumination_iters: int = 60
     likelihood_scale: float = 0.05
+    log_offset: float = 1e-3
     w_gmm: float = 300.0
     w_hue: float = 1.0
     w_entropy: float = 1.0
@@ -190,7 +194,7 @@ class Config:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1):
                 raise ConfigError("%s must be a number from 0 to 1, got %r" % (name, value))
-        for name in ("tol", "likelihood_scale", "gradient_eps", "light_temperature_sigma",
+        for name in ("tol", "likelihood_scale", "log_offset", "gradient_eps", "light_temperature_sigma",
                      "light_tint_sigma"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):

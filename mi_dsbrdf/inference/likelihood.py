@@ -11,9 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Offset of the log (in units of the image's mean observed value): keeps
-#: log finite for black pixels and bounds the weight of dark, noisy ones.
-LOG_OFFSET = 1e-3
 #: Width of the smoothed kink of |.| (in log units): |d| ~ sqrt(d^2 + s^2) - s.
 KINK = 1e-3
 
@@ -26,7 +23,7 @@ def log_likelihood_terms(model, observed, mask, offset, scale=1.0, grad=True):
 
     ``model``, ``observed``: (H, W, C) float arrays (observed saturated or
     invalid pixels are excluded through ``mask`` (H, W) bool); ``offset``: e,
-    in image units (e.g. LOG_OFFSET times the median observed value).
+    in image units (``Config.log_offset`` times the mean observed value).
     Returns (value, d value / d model (H, W, C), or None without ``grad``); both
     finite for zero, negative-rounded or huge model values.
     """

@@ -26,7 +26,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint
 from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior, LightColourPrior
-from mi_dsbrdf.inference.likelihood import LOG_OFFSET, log_likelihood_terms
+from mi_dsbrdf.inference.likelihood import log_likelihood_terms
 
 #: how far (natural log) a recovered kappa/gamma control value may leave the range the
 #: library's materials span at that control point before CURVE_PENALTY applies
@@ -96,7 +96,7 @@ class Posterior:
         self.gmm_volume = config.gmm_volume if gmm_volume is None else gmm_volume
         obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
-        self.offset = LOG_OFFSET * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
+        self.offset = config.log_offset * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
         self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
         self.k, self.R = model.basis.n_bases, model.basis.n_lobes
         n_usable = int(keep.sum())
