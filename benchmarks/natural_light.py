@@ -125,13 +125,16 @@ def setting_name(config, gmm=None) -> str:
     return name or "defaults"
 
 
-def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=None, exposure=1.0) -> list:
+def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=None, exposure=1.0,
+          photons=None) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
     mats = [m for m in mats if materials is None or m in materials]
     truth = {} if truth_samples == 1 else {"truth_samples": truth_samples}
     if exposure != 1.0:
         truth["exposure"] = exposure
+    if photons:
+        truth["photons"] = photons
     extra = dict(truth) if gmm is None else dict(truth, gmm=gmm)
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
@@ -523,6 +526,9 @@ def main(argv=None):
     ap.add_argument("--exposure", type=float, default=1.0, metavar="E",
                     help="each image times E (default 1): the same cases again with only rounding changed, "
                          "a second draw of the optimiser's path; results under <set>-exposure<E>/")
+    ap.add_argument("--photons", type=float, default=None, metavar="N",
+                    help="shot noise: each image as photon counts, N at its mean pixel (Poisson); results under "
+                         "<set>-photons<N>/")
     ap.add_argument("--materials", nargs="*", help="only these materials of the set (validation only)")
     ap.add_argument("--against", metavar="SETTING",
                     help="with --summary: this setting's scores and, case by case, against SETTING (a folder "
@@ -559,13 +565,16 @@ def main(argv=None):
     name = setting_name(config, args.gmm)
     if not (np.isfinite(args.exposure) and args.exposure > 0):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
+    if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
+        sys.exit("--photons must be a finite number > 0, got %r" % args.photons)
     out = os.path.join(OUT, args.set + ("-truth%d" % args.truth_samples if args.truth_samples > 1 else "")
-                       + ("-exposure%g" % args.exposure if args.exposure != 1.0 else ""), name)
+                       + ("-exposure%g" % args.exposure if args.exposure != 1.0 else "")
+                       + ("-photons%g" % args.photons if args.photons else ""), name)
     if not (args.summary or args.report):
         if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         run_on_cluster(cases(args.set, config, args.adam, args.gmm, args.truth_samples, args.materials,
-                             args.exposure), out,
+                             args.exposure, args.photons), out,
                        args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))

@@ -327,6 +327,27 @@ def test_natural_light_exposure_reruns_the_same_cases_with_only_the_image_scaled
             natural_light.main(["--set", "validation", "--exposure", bad])
 
 
+def test_natural_light_photons_adds_the_same_shot_noise_to_the_same_cases():
+    """--photons N: the same cases with the case field "photons"; the noise is
+    Poisson at N photons per mean pixel (its relative spread 1/sqrt(N) there),
+    unbiased, the same draw for the same case id and another for another id;
+    N must be finite and > 0."""
+    import natural_light
+    from mi_dsbrdf.evaluation.experiment import shot_noise
+    plain, noisy = natural_light.cases("report"), natural_light.cases("report", photons=400)
+    assert [c["photons"] for c in noisy] == [400] * len(plain)
+    assert [dict(c, photons=None) for c in noisy] == [dict(c, photons=None) for c in plain]
+    img, mask = np.full((64, 64, 3), 2.5), np.ones((64, 64), bool)
+    a, b, c = (shot_noise(img, mask, 400, seed=s) for s in ("case-1", "case-1", "case-2"))
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    rel = a / 2.5 - 1
+    assert abs(rel.std() - 1 / 20) < 0.003 and abs(rel.mean()) < 0.002
+    for bad in ("0", "-1", "nan", "inf"):
+        with pytest.raises(SystemExit, match="--photons must be a finite number > 0"):
+            natural_light.main(["--set", "validation", "--photons", bad])
+
+
 def test_natural_light_choose_never_picks_an_overruled_setting(tmp_path):
     """A setting holding a value of natural_light.OVERRULED is scored and listed
     but not chosen, even with the lowest score; the next best is."""

@@ -14,6 +14,9 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      the texel centres; the probe's map integrated over each texel's footprint as s x s directions),
      "exposure": the rendered image's factor (optional, probes, default 1: the result must not
      depend on it; another exposure reruns the case with only rounding changed),
+     "photons": shot noise (optional, probes; default none): the image as photon counts, this many
+     at its mean usable pixel, Poisson-drawn (:func:`shot_noise`; a camera's raw image near
+     mid-grey holds a few thousand),
      "start": index into :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (optional,
      probes: run from that start alone, a diagnostic of the choice among them)}
 
@@ -123,6 +126,16 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
     return img.reshape(h, w, 3)
 
 
+def shot_noise(image, mask, photons, seed) -> np.ndarray:
+    """``image`` (H, W, 3) with photon (Poisson) noise: counted at ``photons`` per
+    unit of the mean of its ``mask`` pixels and scaled back. ``seed``: any
+    string (the case's id), so that a case draws the same noise every run."""
+    img = np.asarray(image, dtype=np.float64)
+    unit = float(img[np.asarray(mask, bool)].mean()) / float(photons)
+    rng = np.random.default_rng(int.from_bytes(hashlib.sha256(str(seed).encode()).digest()[:8], "little"))
+    return rng.poisson(np.maximum(img, 0.0) / unit) * unit
+
+
 def loo_model(name, cache, gmm=None):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
     library from the other 99 fits; the GMM of structure ``gmm``, default the
@@ -224,6 +237,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         truth = downsample(probe, 2 * H, 2 * W)
         ts = texels(merl, res, (2 * H, 2 * W), shape=shape, samples=case.get("truth_samples", 1))
         img = render(ts, truth.reshape(-1, 3)) * case.get("exposure", 1.0)
+        if case.get("photons"):
+            img = shot_noise(img, ts.mask, case["photons"], seed=case["id"])
         if method == "mean-constant":
             # doing nothing: the model's mean material (psi = 0) under a constant map
             out["seconds"] = 0.0
