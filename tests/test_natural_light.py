@@ -5,7 +5,8 @@ by the deterministic forward model under a procedural sky, recovered with a
 model rebuilt without that material (bases, GMM and hue prior from the other
 99 fits). The recovered map must beat a constant map and the recovered BRDF the
 model's mean material; a near-Lambertian material must come back without a
-highlight.
+highlight. Each also with shot noise (a photograph's: 200 photons at the mean
+pixel, :func:`~mi_dsbrdf.evaluation.experiment.shot_noise`).
 """
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ import pytest
 from mi_dsbrdf.app.demo import brdf_errors
 from mi_dsbrdf.app.scenes import sphere_scene
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.evaluation.experiment import downsample, loo_model
+from mi_dsbrdf.evaluation.experiment import downsample, loo_model, shot_noise
 from mi_dsbrdf.evaluation.metrics import highlight_ratio, scale_invariant_log_error
 from mi_dsbrdf.inference import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
@@ -22,16 +23,21 @@ from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.samples import samples_from_function
 
 RES, MAP = 32, (16, 32)
+#: shot noise of the noisy variants: photons at the image's mean pixel
+PHOTONS = 200
 
 
-def recover(name, cache):
+def recover(name, cache, photons=None):
     """(recovery, truth material, truth map at the recovered size, model) of ``name``
-    under a sky, recovered with the leave-one-out model (built into ``cache``)."""
+    under a sky, recovered with the leave-one-out model (built into ``cache``),
+    from an image with ``photons`` shot noise (None: noise-free)."""
     sky = procedural_sky(2 * MAP[0], 2 * MAP[1], sun_direction=(0.4, 0.6, 0.7)).astype(np.float64)
     s = sphere_scene({"type": "dsbrdf", "material": name}, RES)
     ts = TexelSum(s, s.shapes()[0], sky.shape[:2])
     img = np.zeros((RES * RES, 3))
     img[ts.pixels] = ts.render(sky.reshape(-1, 3))
+    if photons:
+        img = shot_noise(img, ts.mask.reshape(-1), photons, seed=name)
     s2 = sphere_scene({"type": "dsbrdf"}, RES)
     ts2 = TexelSum(s2, s2.shapes()[0], MAP)
     model = loo_model(name, str(cache))
@@ -40,9 +46,10 @@ def recover(name, cache):
     return res, model_data.shipped_model().library_material(name), downsample(sky, *MAP), model
 
 
+@pytest.mark.parametrize("photons", [None, PHOTONS])
 @pytest.mark.parametrize("name", ["green-plastic"])
-def test_recovery_beats_a_constant_map_and_the_mean_material(name, tmp_path):
-    res, truth, sky, model = recover(name, tmp_path)
+def test_recovery_beats_a_constant_map_and_the_mean_material(name, photons, tmp_path):
+    res, truth, sky, model = recover(name, tmp_path, photons)
     assert np.all(np.isfinite(res.illumination)) and np.all(np.isfinite(res.psi))
     seen = res.seen
     for convention in ("cosine", "paper"):
@@ -52,8 +59,9 @@ def test_recovery_beats_a_constant_map_and_the_mean_material(name, tmp_path):
     assert brdf_errors(res.material, truth)["paper"] < brdf_errors(model.mean_material(), truth)["paper"]
 
 
-def test_a_near_lambertian_material_comes_back_without_a_highlight(tmp_path):
-    res, truth, _, model = recover("pink-felt", tmp_path)
+@pytest.mark.parametrize("photons", [None, PHOTONS])
+def test_a_near_lambertian_material_comes_back_without_a_highlight(photons, tmp_path):
+    res, truth, _, model = recover("pink-felt", tmp_path, photons)
     s = samples_from_function(lambda th, td, pd: truth.eval(th, td))
     ratio = [highlight_ratio(m.eval(s.theta_h, s.theta_d), s.theta_h, s.theta_d)
              for m in (res.material, truth, model.mean_material())]
