@@ -127,8 +127,8 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
 
 
 def shot_noise(image, mask, photons, seed) -> np.ndarray:
-    """``image`` (H, W, 3) with photon (Poisson) noise: counted at ``photons`` per
-    unit of the mean of its ``mask`` pixels and scaled back. ``seed``: any
+    """``image`` (..., 3) with photon (Poisson) noise: counted at ``photons`` per
+    unit of the mean of its ``mask`` (...) pixels, and scaled back. ``seed``: any
     string (the case's id), so that a case draws the same noise every run."""
     img = np.asarray(image, dtype=np.float64)
     unit = float(img[np.asarray(mask, bool)].mean()) / float(photons)
