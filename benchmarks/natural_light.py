@@ -112,17 +112,14 @@ def parse_config(items) -> dict:
     for item in items or []:
         k, v = (item.split("=", 1) if "=" in item
                 else re.fullmatch(r"(.*?)(-?[0-9.]+(?:e[-+]?[0-9]+)?)", item).groups())
-        try:
-            out[k] = int(v) if v.lstrip("-").isdigit() else float(v)
-        except ValueError:                   # a word (gradient_space=radiance): named, not read back
-            out[k] = v
+        out[k] = int(v) if v.lstrip("-").isdigit() else float(v)
     return out
 
 
 def setting_name(config, gmm=None) -> str:
     """``w_gmm100-w_gradient30000``, with ``gmm-full-2-0.01-`` before it for a GMM
     structure other than the build's; ``defaults`` for neither."""
-    name = "-".join("%s%s" % (k, v if isinstance(v, str) else "%g" % v) for k, v in sorted(config.items()))
+    name = "-".join("%s%g" % (k, v) for k, v in sorted(config.items()))
     if gmm is not None:
         name = "-".join(["gmm"] + [str(p) for p in gmm_structure(gmm)] + ([name] if name else []))
     return name or "defaults"

@@ -83,8 +83,6 @@ class Config:
     gradient_alpha : the gradient prior's exponent alpha (0 < alpha < 1; Eq. 16):
         the smaller, the heavier its tail (a sharp edge costs little more than
         a medium one) at about the same stiffness where the map is flat
-    gradient_space : "log" (the differences of the log map) or "radiance" (of
-        the map itself, eps then in units of the image's mean pixel)
     gmm_volume : the fraction (0 to 1) of its components' volume terms the GMM
         prior keeps: 1 is the normalised density of Eq. 6, 0 ranks psi by weight
         and Mahalanobis distance to each component only
@@ -164,7 +162,6 @@ class Config:
     light_tint_sigma: float = 0.05
     gradient_eps: float = 0.1
     gradient_alpha: float = 0.5
-    gradient_space: str = "log"
     gmm_volume: float = 0.0
     light_gmm_volume: float = 1.0
     map_levels: int = 2
@@ -192,8 +189,6 @@ class Config:
         g = self.grey_texel_samples
         if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 1):
             raise ConfigError("grey_texel_samples must be None or an integer >= 1, got %r" % (g,))
-        if self.gradient_space not in ("log", "radiance"):
-            raise ConfigError("gradient_space must be 'log' or 'radiance', got %r" % (self.gradient_space,))
         a = self.gradient_alpha
         if not (isinstance(a, (int, float)) and not isinstance(a, bool) and 0 < a < 1):
             raise ConfigError("gradient_alpha must be a number between 0 and 1 (exclusive), got %r" % (a,))

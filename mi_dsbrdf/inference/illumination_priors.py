@@ -91,16 +91,12 @@ class GradientPrior:
     solid angle. eps keeps the gradient finite at the kink |grad x| = 0, and
     sets how stiff the prior is where the map is flat (its curvature there grows
     as eps^(alpha - 2)); inference takes it from ``Config.gradient_eps``.
-    ``space`` "radiance" takes the same differences of L = e^x instead of x
-    (``Config.gradient_space``; eps then in the image's units).
     """
 
-    def __init__(self, weight=1.0, alpha=0.5, eps=1e-2, space="log"):
+    def __init__(self, weight=1.0, alpha=0.5, eps=1e-2):
         if not 0 < alpha < 1:
             raise ValueError("the hyper-Laplacian exponent alpha must be in (0, 1), got %r" % alpha)
-        if space not in ("log", "radiance"):
-            raise ValueError("the gradient prior's space must be 'log' or 'radiance', got %r" % (space,))
-        self.weight, self.alpha, self.eps, self.space = float(weight), float(alpha), float(eps), space
+        self.weight, self.alpha, self.eps = float(weight), float(alpha), float(eps)
 
     @staticmethod
     def differences(log_map) -> tuple:
@@ -117,8 +113,7 @@ class GradientPrior:
         return dphi, dth, inv_s
 
     def __call__(self, log_map):
-        y = np.exp(np.asarray(log_map, dtype=np.float64)) if self.space == "radiance" else log_map
-        dphi, dth, inv_s = self.differences(y)
+        dphi, dth, inv_s = self.differences(log_map)
         H_, W_, _ = dphi.shape
         m2 = (dphi ** 2 + dth ** 2).sum(axis=2) + self.eps ** 2    # (H, W)
         w = _texel_weights(H_, W_)
@@ -128,8 +123,6 @@ class GradientPrior:
         gth = c * dth
         g = -gphi + np.roll(gphi, 1, axis=1) - gth
         g[1:] += gth[:-1]
-        if self.space == "radiance":
-            g = g * y                       # d/dx of a function of y = e^x
         return self.weight * val, self.weight * g
 
 

@@ -133,8 +133,7 @@ class Posterior:
                                        axis=1))
         self.w = config.prior_weights(n_usable)
         self.entropy = EntropyPrior(self.w["entropy"])
-        self.gradient = GradientPrior(self.w["gradient"], alpha=config.gradient_alpha, eps=config.gradient_eps,
-                                      space=config.gradient_space)
+        self.gradient = GradientPrior(self.w["gradient"], alpha=config.gradient_alpha, eps=config.gradient_eps)
         self.light_colour = LightColourPrior(self.w["light_colour"], config.light_temperature_sigma,
                                              config.light_tint_sigma)
 
