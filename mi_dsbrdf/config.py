@@ -35,12 +35,6 @@ class Config:
         product with the transport: cheap)
     likelihood_scale : Laplacian scale b of Eq. 19 in log units (the expected
         |log error| of a pixel)
-    fit_likelihood_scale : b is unknown and fitted with the rest (its MAP
-        under an inverse-gamma prior worth one image of residuals of size
-        ``likelihood_scale``): the likelihood becomes
-        n log(1 + S / (n b0)) for the sum S of |log error| over the n residuals,
-        i.e. Eq. 19 at the scale b = S / n + b0, so an image the model fits
-        poorly leans more on the priors. False: b = ``likelihood_scale``
     log_offset : the offset e of the likelihood's log(I + e), as a fraction of
         the image's mean usable pixel: keeps the log finite for black pixels
         and bounds the weight of dark, noisy ones. 0.01 had fewer BRDF wins on
@@ -157,7 +151,6 @@ class Config:
     block_iters: int = 15
     illumination_iters: int = 60
     likelihood_scale: float = 0.05
-    fit_likelihood_scale: bool = False
     log_offset: float = 1e-3
     w_gmm: float = 300.0
     w_hue: float = 1.0
@@ -193,9 +186,6 @@ class Config:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
-        if not any(self.fit_likelihood_scale is v for v in (True, False)) and self.fit_likelihood_scale not in (0, 1):
-            raise ConfigError("fit_likelihood_scale must be True or False, got %r" % (self.fit_likelihood_scale,))
-        object.__setattr__(self, "fit_likelihood_scale", bool(self.fit_likelihood_scale))
         g = self.grey_texel_samples
         if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 1):
             raise ConfigError("grey_texel_samples must be None or an integer >= 1, got %r" % (g,))

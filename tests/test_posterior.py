@@ -103,11 +103,9 @@ def test_light_colour_prior_prices_the_maps_mean_colour_only():
         LightColourPrior(tint_sigma=0.0)
 
 
-@pytest.mark.parametrize("fit_scale", [False, True])
-def test_posterior_illumination_terms_gradient_matches_finite_differences(fit_scale):
+def test_posterior_illumination_terms_gradient_matches_finite_differences():
     """The sum the illumination block minimises (likelihood + entropy + gradient
-    priors through the transport), against central differences in log L, with the
-    likelihood's scale fixed and fitted (``Config.fit_likelihood_scale``)."""
+    priors through the transport), against central differences in log L."""
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.inference.objective import Posterior
     from mi_dsbrdf.model import model_file as model_data
@@ -119,7 +117,7 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences(fit_sc
     observed = np.zeros((144, 3))
     observed[ts.pixels] = ts.render(procedural_sky(4, 8))
     post = Posterior(ts, observed.reshape(12, 12, 3), ts.mask, model_data.shipped_model(),
-                               Config(map_size=(4, 8), fit_likelihood_scale=fit_scale))
+                               Config(map_size=(4, 8)))
     T = post.transport(np.zeros(post.k), np.zeros((post.R, 2)))
     seen = ~post.view.unseen.reshape(4, 8)
     x = np.log(procedural_sky(4, 8).astype(np.float64)) + np.random.default_rng(1).normal(0, 0.3, (4, 8, 3))

@@ -100,7 +100,6 @@ class Posterior:
         self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
         self.k, self.R = model.basis.n_bases, model.basis.n_lobes
         n_usable = int(keep.sum())
-        self.n_residuals = 3 * n_usable                       # the likelihood's terms (pixels x channels)
         # the posterior's pixels (Config.map_pairs): all usable ones, or an evenly
         # spread subset whose likelihood is scaled up (``weight``) to stand for all
         if max_pixels is None:
@@ -227,40 +226,24 @@ class Posterior:
         """Eq. 19 over the reflectance block's pixels (``self.refl``) of ``material``
         under the light L (T, 3), scaled to stand for all usable pixels."""
         v = self.refl
-        image = v.lobes.render(material, L)
-        total = log_likelihood_terms(image[:, None, :], v.observed[:, None, :], v.keep[:, None], self.offset,
-                                     grad=False)[0]
-        return self.likelihood_value(total * v.weight)
+        return self.likelihood(v.lobes.render(material, L), v.observed, v.keep) * v.weight
 
-    def likelihood_value(self, total) -> float:
-        """Eq. 19 from ``total``, the sum of |log error| over all usable pixels:
-        total / b, or with ``Config.fit_likelihood_scale`` its value at the fitted
-        scale, n log(1 + total / (n b)) (the inverse-gamma prior's MAP, less its
-        value at a perfect fit; the same as total / b while total << n b)."""
-        if not self.cfg.fit_likelihood_scale:
-            return total / self.scale
-        n = self.n_residuals
-        return n * float(np.log1p(total / (n * self.scale)))
-
-    def likelihood_slope(self, total) -> float:
-        """d :meth:`likelihood_value` / d total: 1 / b at the scale the value is taken at."""
-        if not self.cfg.fit_likelihood_scale:
-            return 1.0 / self.scale
-        return 1.0 / (total / self.n_residuals + self.scale)
+    def likelihood(self, image, observed, keep) -> float:
+        """Eq. 19 of the pixel radiance ``image`` (P, 3) against ``observed`` (P, 3)
+        at the pixels ``keep`` (P,), unweighted."""
+        return log_likelihood_terms(image[:, None, :], observed[:, None, :], keep[:, None], self.offset,
+                                    self.scale, grad=False)[0]
 
     # --- illumination ------------------------------------------------------------
     def map_likelihood(self, log_map, T, seen, grad=True) -> tuple:
         """(value, d/d log_map or None) of the likelihood (Eq. 19) of the map at fixed reflectance."""
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
         image = apply_transport(T, L)
-        total, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
-                                            self.offset, grad=grad)
-        total *= self.weight
+        lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
+                                          self.offset, self.scale, grad)
         if not grad:
-            return self.likelihood_value(total), None
-        slope = self.likelihood_slope(total) * self.weight
-        return (self.likelihood_value(total),
-                transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * (L * slope))
+            return lik * self.weight, None
+        return lik * self.weight, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * (L * self.weight)
 
     def illumination_terms(self, log_map, T, seen, bins) -> tuple:
         """(value, d/d log_map, likelihood) of likelihood + entropy + gradient (+ light

@@ -149,8 +149,7 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         # IRLS weights of the Laplacian, graduated: while most residuals are large the
         # kink is widened to their median (least squares far away, L1 near the optimum)
         kink = max(KINK, float(np.median(np.abs(d))))
-        slope = post.likelihood_slope(float((np.sqrt(d * d + KINK * KINK) - KINK).sum()) * view.weight)
-        w = view.weight * slope / np.sqrt(d * d + kink * kink)
+        w = view.weight / (np.sqrt(d * d + kink * kink) * post.scale)
         H = (Jd * w) @ Jd.T
         g = Jd @ (w * d)
         if post.model.gmm is not None:
