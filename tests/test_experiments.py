@@ -61,6 +61,20 @@ def test_highlight_ratio_tells_a_highlight_from_none():
         metrics.highlight_ratio(s.values[:1], s.theta_h[:1] + 1.0, s.theta_d[:1])
 
 
+def test_log_error_by_theta_d_finds_a_curve_end_too_bright():
+    """A model right everywhere but 3x too bright beyond theta_d = 75 deg: that band
+    holds all of Eq. 20's error, with mean log 3; the others none."""
+    s = samples_from_function(lambda th, td, pd: np.full(th.shape + (3,), 0.3))
+    model = s.values * np.where(np.degrees(s.theta_d) >= 75, 3.0, 1.0)[:, None]
+    bands = metrics.log_error_by_theta_d(model, s.values, s.theta_d)
+    assert list(bands) == ["0-30", "30-60", "60-75", "75-90"]
+    assert bands["75-90"]["mean"] == pytest.approx(np.log(3.0), rel=1e-5)
+    assert bands["75-90"]["share"] == pytest.approx(1.0)
+    assert bands["0-30"]["rms"] == bands["30-60"]["share"] == 0.0
+    # the scale of Eq. 20 is applied: the same model at 1/3 is right beyond 75 deg only
+    assert metrics.log_error_by_theta_d(model, s.values, s.theta_d, 1 / 3)["75-90"]["rms"] == pytest.approx(0, abs=1e-6)
+
+
 def test_bsdf_values_of_the_plugin_match_the_material():
     m = model_data.shipped_model().library_material("gold-metallic-paint")
     s = samples_from_function(lambda th, td, pd: m.eval(th, td))
@@ -90,6 +104,10 @@ def test_the_do_nothing_baseline_is_scored_like_a_method(data, tmp_path):
     assert r["finite"] and r["seconds"] == 0.0 and r["rounds"] == 0
     assert r["illumination_error"] > 0.1           # grace is far from constant
     assert r["brdf_eq20_paper"] > 0 and r["brdf_eq20_cosine"] > 0 and set(r["relight"]) == {"pisa", "uffizi"}
+    # the bands of Eq. 20 add up to it; the mean material is stored as its psi (zeros)
+    bands = r["brdf_eq20_paper_by_theta_d"]
+    assert sum(b["share"] for b in bands.values()) == pytest.approx(1.0)
+    assert r["material"]["psi"] == [0.0] * len(r["material"]["psi"])
 
 
 def test_a_case_s_config_overrides_its_rounds(data, tmp_path):

@@ -33,6 +33,9 @@ fit is left out of bases and priors) and scores it:
 * ``brdf_eq5_paper``, ``brdf_eq5_cosine``: Eq. 5 with the known light scale
   (point lights: the BRDF times recovered / true intensity);
 * ``direction_error_deg`` (point lights);
+* ``brdf_eq20_paper_by_theta_d``: where in theta_d that error lies
+  (:func:`~mi_dsbrdf.evaluation.metrics.log_error_by_theta_d`); ``material``: the
+  recovered psi and chromaticity (DSBRDF answers in basis form);
 * ``highlight_ratio``, ``truth_highlight_ratio``: the recovered and the
   measured BRDF's peak over off-peak (:func:`~mi_dsbrdf.evaluation.metrics.highlight_ratio`):
   a near-Lambertian material must not come back with a highlight;
@@ -71,6 +74,7 @@ from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
 from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
+                                          log_error_by_theta_d,
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
                                           scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
@@ -268,7 +272,11 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         out["seen_fraction"] = float(seen.mean())
         maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
     for c in CONVENTIONS:
-        out["brdf_eq20_" + c] = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
+        out["brdf_eq20_" + c], scale = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)
+        if c == "paper":
+            out["brdf_eq20_paper_by_theta_d"] = log_error_by_theta_d(values, samples.values, samples.theta_d, scale)
+    if getattr(material, "psi", None) is not None:
+        out["material"] = {"psi": material.psi.tolist(), "chromaticity": material.chromaticity.tolist()}
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
     out["truth_highlight_ratio"] = highlight_ratio(samples.values, samples.theta_h, samples.theta_d)
     out["trace"] = [float(r["neg_log_posterior"]) for r in rows]

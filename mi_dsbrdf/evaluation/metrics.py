@@ -18,6 +18,7 @@ Functions:
 * :func:`log_rmse_scale_invariant` — Eq. 20, the same after the best overall
   scale of the model: what one image under unknown light can determine;
 * :func:`material_errors` — of a material against measured samples, both conventions;
+* :func:`log_error_by_theta_d` — where in theta_d Eq. 20 (paper) lies;
 * :func:`scale_invariant_log_error` — Eq. 20's measure on images and
   illumination maps; :func:`direction_error_deg` for a recovered light;
 * :func:`highlight_ratio` — peak over off-peak of a BRDF: whether a
@@ -85,6 +86,32 @@ def log_rmse_scale_invariant(model_values, measured_values, cos_i, convention="p
     res = minimize_scalar(lambda log_s: log_rmse(m * np.exp(log_s), measured_values, cos_i, convention),
                           method="bounded", bounds=(math.log(1e-6), math.log(1e6)), options={"xatol": 1e-6})
     return float(res.fun), float(np.exp(res.x))
+
+
+#: theta_d bands (degrees) of :func:`log_error_by_theta_d`: the last holds the
+#: grazing pairs a sphere shows only at its rim, lit from behind it
+THETA_D_BANDS = ((0, 30), (30, 60), (60, 75), (75, 90))
+
+
+def log_error_by_theta_d(model_values, measured_values, theta_d, scale=1.0, bands=THETA_D_BANDS) -> dict:
+    """Where in theta_d Eq. 20 (paper convention) lies: for each band
+    ``"lo-hi"`` (degrees) of :data:`THETA_D_BANDS`, the RMS and the mean of
+    log(s f + 1e-6) - log(rho + 1e-6) over its samples and channels, and the
+    share of the total squared error it holds. ``scale``: s, the model's best
+    overall scale (:func:`log_rmse_scale_invariant`'s second value); ``theta_d``
+    (N,) in radians. A mean far from 0 in one band is a curve's end too bright
+    (> 0) or too dark (< 0) there."""
+    d = log_brdf(np.asarray(model_values, dtype=np.float64) * scale, None) - log_brdf(measured_values, None)
+    td = np.degrees(np.asarray(theta_d, dtype=np.float64))
+    total = max(float((d * d).sum()), 1e-300)
+    out = {}
+    for lo, hi in bands:
+        sel = (td >= lo) & (td < hi) if hi < 90 else (td >= lo) & (td <= hi)
+        if not sel.any():
+            continue
+        out["%d-%d" % (lo, hi)] = {"rms": float(np.sqrt(np.mean(d[sel] ** 2))), "mean": float(d[sel].mean()),
+                                   "share": float((d[sel] ** 2).sum() / total)}
+    return out
 
 
 def material_errors(material, samples, scale_invariant=True, conventions=CONVENTIONS) -> dict:
