@@ -19,8 +19,11 @@ control values are replaced, everything else kept, by
   inference: how much any estimate of the end could gain),
 
 and Eq. 20 (paper) is scored against doing nothing. Offline: no inference runs.
+``--parts`` adds the oracle for other parts of the answer: each lobe's two
+curves, the control values the image sees (0-3), and the chromaticity, each
+spliced alone.
 
-    .venv/bin/python benchmarks/curve_tail.py benchmarks/results/natural_light/theta_d_bands_validation
+    .venv/bin/python benchmarks/curve_tail.py benchmarks/results/natural_light/theta_d_bands_validation [--parts]
 
 Validation cases only. Prints a line per case and the medians; writes
 benchmarks/results/curve_tail.json.
@@ -52,6 +55,8 @@ def main(argv=None):
     from mi_dsbrdf.model.samples import samples_from_table
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("folder", help="a natural-light results folder whose records hold the recovered material")
+    ap.add_argument("--parts", action="store_true",
+                    help="also the oracle for each lobe's curves and for the seen control values (0-3)")
     args = ap.parse_args(argv)
     nbrdf = os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")
     per_material, rows = {}, {}
@@ -62,13 +67,14 @@ def main(argv=None):
             model = ex.loo_model(name, CACHE)
             samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, name))
             library = np.stack([model.basis.control_values(model.library_material(n).psi) for n in model.library])
-            per_material[name] = (model.basis, samples, library,
-                                  model.basis.control_values(fit_basis(samples, model.basis).material.psi))
-        basis, samples, library, fitted = per_material[name]
+            fit = fit_basis(samples, model.basis).material
+            per_material[name] = (model.basis, samples, library, model.basis.control_values(fit.psi),
+                                  fit.chromaticity)
+        basis, samples, library, fitted, fitted_chroma = per_material[name]
         chroma = np.array(rec["material"]["chromaticity"])
         ctrl = basis.control_values(np.array(rec["material"]["psi"]))      # (R, 2, 6)
 
-        def ratio(c):
+        def ratio(c, chroma=chroma):
             mat = Material(*clamp_controls(c[:, 0], c[:, 1]), chroma, knots=basis.knots)
             e = log_rmse_scale_invariant(mat.eval(samples.theta_h, samples.theta_d), samples.values,
                                          samples.cos_i, "paper")[0]
@@ -87,9 +93,18 @@ def main(argv=None):
         oracle[:, :, TAIL:] = fitted[:, :, TAIL:]
         row = {k: ratio(c) for k, c in (("as-is", ctrl), ("regress", regress), ("lib-steps", steps),
                                         ("oracle", oracle))}
+        if args.parts:                      # the oracle for other parts: each lobe, the seen knots
+            for r in range(ctrl.shape[0]):
+                part = ctrl.copy()
+                part[r] = fitted[r]
+                row["oracle lobe %d" % r] = ratio(part)
+            part = ctrl.copy()
+            part[:, :, :TAIL] = fitted[:, :, :TAIL]
+            row["oracle seen"] = ratio(part)
+            row["oracle colour"] = ratio(ctrl, fitted_chroma)
         rows[os.path.basename(f)[:-5]] = row
         print("%-70s %s" % (os.path.basename(f)[:-5], "  ".join("%s %.2f" % kv for kv in row.items())), flush=True)
-    keys = ("as-is", "regress", "lib-steps", "oracle")
+    keys = tuple(next(iter(rows.values())))
     a = np.array([[r[k] for k in keys] for r in rows.values()])
     print("median ratio to doing nothing: " + ", ".join("%s %.3f" % (k, v) for k, v in zip(keys, np.median(a, 0))))
     print("below doing nothing: " + ", ".join("%s %d" % (k, v) for k, v in zip(keys, (a < 1).sum(0))))
