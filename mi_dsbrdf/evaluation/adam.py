@@ -27,6 +27,8 @@ from mi_dsbrdf.brdf.dsbrdf import Material
 
 #: Adam's learning rate for the BSDF variables and for the log illumination
 LR_BSDF, LR_MAP = 0.02, 0.05
+#: the largest gradient component Adam is given (its square stays a float32)
+GRAD_LIMIT = 1e15
 
 
 def _scene(bsdf, res, map_hw, shape, level):
@@ -38,18 +40,16 @@ def _scene(bsdf, res, map_hw, shape, level):
 
 def drop_non_finite_gradients(opt) -> int:
     """Set every non-finite gradient component of the optimizer's variables to 0
-    (that component skips the step; Adam's moments keep it moving). A Monte
-    Carlo gradient through the ``dsbrdf`` plugin can overflow at extreme psi
-    under a noisy image, and one NaN step would turn every variable NaN (three
-    of 72 noisy report cases did). Returns how many components were dropped."""
+    (that component skips the step; Adam's moments keep it moving) and clip the
+    others to +-GRAD_LIMIT (Adam squares them in float32). A Monte Carlo
+    gradient through the ``dsbrdf`` plugin can overflow at extreme psi under a
+    noisy image. Returns how many components were dropped."""
     dropped = 0
     for key in list(opt.keys()):
         g = dr.grad(opt[key])
         bad = ~dr.isfinite(g)
-        n = int(np.count_nonzero(np.array(bad)))
-        if n:
-            dr.set_grad(opt[key], dr.select(bad, 0, g))
-            dropped += n
+        dropped += int(np.count_nonzero(np.array(bad)))
+        dr.set_grad(opt[key], dr.clip(dr.select(bad, 0, g), -GRAD_LIMIT, GRAD_LIMIT))
     return dropped
 
 
@@ -59,7 +59,9 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     over ``mask`` (res, res) bool by Adam through Mitsuba's ``prb``.
 
     Returns {"bsdf": the Mitsuba BSDF (principled) or a DSBRDF Material,
-    "map": (H, W, 3) float64, "rows": [{"round", "neg_log_posterior", "seconds"}]}.
+    "map": (H, W, 3) float64, "rows": [{"round", "neg_log_posterior", "seconds"}]}:
+    the last iterate's, or if the loss turns non-finite (Adam diverged) the
+    lowest-loss iterate's, the loop stopped there.
     """
     if method == "principled-adam":
         bsdf = {"type": "principled", "base_color": {"type": "rgb", "value": [0.5, 0.5, 0.5]},
@@ -86,11 +88,23 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     target = mi.TensorXf(np.log(np.maximum(obs, 0) + offset).astype(np.float32))
     weight = mi.TensorXf(np.repeat(m[..., None], 3, axis=2).astype(np.float32) / (3 * m.sum()))
     rows, t0 = [], time.perf_counter()
+    best = (np.inf, None)           # the lowest loss so far and the variables it was rendered with
     for it in range(iters):
         params["emitter.data"] = dr.exp(opt["log_map"])
         params.update(opt)
         img = mi.render(scene, params, spp=spp, seed=seed + it)
         loss = dr.sum(dr.abs(dr.log(dr.fmax(img, 0.0) + offset) - target) * weight, axis=None)
+        value = float(np.array(loss).reshape(-1)[0])
+        if not np.isfinite(value):
+            # Adam diverged (a noisy image can drive the dsbrdf plugin's psi to where it
+            # overflows): the answer is the best iterate, as a user's loop would keep
+            # (otherwise the last one, as before)
+            rows.append({"round": it, "neg_log_posterior": value, "seconds": time.perf_counter() - t0})
+            for key, v in (best[1] or {}).items():
+                opt[key] = v
+            break
+        if value < best[0]:
+            best = (value, {key: type(opt[key])(opt[key]) for key in opt.keys()})
         dr.backward(loss)
         drop_non_finite_gradients(opt)
         opt.step()
@@ -99,8 +113,7 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
         if method == "dsbrdf-adam":          # chromaticity: each lobe's three values sum to one
             c = np.array(opt["object.bsdf.chromaticity"], np.float64).reshape(-1, 3)
             opt["object.bsdf.chromaticity"] = mi.Float((c / c.sum(axis=1, keepdims=True)).reshape(-1))
-        rows.append({"round": it, "neg_log_posterior": float(np.array(loss).reshape(-1)[0]),
-                     "seconds": time.perf_counter() - t0})
+        rows.append({"round": it, "neg_log_posterior": value, "seconds": time.perf_counter() - t0})
         if progress:
             progress(rows[-1])
     params["emitter.data"] = dr.exp(opt["log_map"])
