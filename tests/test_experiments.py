@@ -112,6 +112,31 @@ def test_adam_baseline_lowers_its_loss():
         adam_recover(img, ts.mask, 24, (8, 16), "nonsense")
 
 
+def test_a_diverged_adam_run_stops_at_its_best_iterate(monkeypatch):
+    """A variable that turns NaN (Adam diverged; it renders black, so the loss may
+    stay finite) ends the loop there, and the answer is the lowest-loss iterate's:
+    finite."""
+    import drjit as dr
+    import mitsuba as mi
+    from mi_dsbrdf.evaluation import adam
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    ts = ev.texels({"type": "dsbrdf", "material": "gold-metallic-paint"}, 24, (16, 32))
+    img = ev.render(ts, procedural_sky(16, 32).reshape(-1, 3))
+    calls = []
+
+    def poisoned(opt):                       # the 6th step takes a NaN gradient into roughness
+        calls.append(1)
+        if len(calls) == 6:
+            key = "object.bsdf.roughness.value"
+            dr.set_grad(opt[key], dr.grad(opt[key]) * float("nan"))
+        return 0
+    monkeypatch.setattr(adam, "drop_non_finite_gradients", poisoned)
+    fit = adam.adam_recover(img, ts.mask, 24, (8, 16), "principled-adam", spp=4, iters=20)
+    assert len(fit["rows"]) == 6 and np.all(np.isfinite([r["neg_log_posterior"] for r in fit["rows"]]))
+    assert np.all(np.isfinite(fit["map"])) and np.all(fit["map"] > 0)
+    assert np.isfinite(np.array(mi.traverse(fit["bsdf"])["roughness.value"])).all()
+
+
 def test_the_do_nothing_baseline_is_scored_like_a_method(data, tmp_path):
     """mean-constant: the (leave-one-out) model's mean material under a constant
     map, scored with every measure, in no time."""

@@ -60,8 +60,8 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
 
     Returns {"bsdf": the Mitsuba BSDF (principled) or a DSBRDF Material,
     "map": (H, W, 3) float64, "rows": [{"round", "neg_log_posterior", "seconds"}]}:
-    the last iterate's, or if the loss turns non-finite (Adam diverged) the
-    lowest-loss iterate's, the loop stopped there.
+    the last iterate's, or if the loss or a variable turns non-finite (Adam
+    diverged) the lowest-loss iterate's, the loop stopped there.
     """
     if method == "principled-adam":
         bsdf = {"type": "principled", "base_color": {"type": "rgb", "value": [0.5, 0.5, 0.5]},
@@ -106,7 +106,10 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
         # the loss read after the step, as the loop always did (read before it, it cost 15 % of the time)
         value = float(np.array(loss).reshape(-1)[0])
         rows.append({"round": it, "neg_log_posterior": value, "seconds": time.perf_counter() - t0})
-        if not np.isfinite(value):
+        # a NaN variable renders black through dr.fmax, so the loss alone may stay finite
+        finite = [dr.all(dr.isfinite(opt[key]), axis=None) for key in opt.keys()]
+        dr.eval(*finite)                     # one launch for all of them
+        if not (np.isfinite(value) and all(bool(f) for f in finite)):
             # Adam diverged (a noisy image can drive the dsbrdf plugin's psi to where it
             # overflows): the answer is the best iterate, as a user's loop would keep
             # (otherwise the last one, as before)
