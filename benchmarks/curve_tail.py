@@ -50,7 +50,7 @@ def main(argv=None):
     from mi_dsbrdf.brdf.dsbrdf import Material, clamp_controls
     from mi_dsbrdf.brdf.measured import MeasuredBRDF
     from mi_dsbrdf.evaluation import experiment as ex
-    from mi_dsbrdf.evaluation.metrics import log_rmse_scale_invariant
+    from mi_dsbrdf.evaluation.metrics import material_errors
     from mi_dsbrdf.model.fitting import fit_basis
     from mi_dsbrdf.model.samples import samples_from_table
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -76,19 +76,16 @@ def main(argv=None):
 
         def ratio(c, chroma=chroma):
             mat = Material(*clamp_controls(c[:, 0], c[:, 1]), chroma, knots=basis.knots)
-            e = log_rmse_scale_invariant(mat.eval(samples.theta_h, samples.theta_d), samples.values,
-                                         samples.cos_i, "paper")[0]
-            return e / rec["baseline"]["brdf_eq20_paper"]
+            return material_errors(mat, samples, conventions=("paper",))["paper"] / rec["baseline"]["brdf_eq20_paper"]
 
         regress, steps, oracle = ctrl.copy(), ctrl.copy(), ctrl.copy()
         mean = library.mean(axis=0)
+        reg = RIDGE * len(library) * np.diag([0.0] + [1.0] * TAIL)      # the intercept unpenalised
         for r in range(ctrl.shape[0]):
             for q in range(2):
                 X = np.c_[np.ones(len(library)), library[:, r, q, :TAIL]]
-                reg = RIDGE * len(library) * np.diag([0.0] + [1.0] * TAIL)
-                for j in range(TAIL, ctrl.shape[2]):
-                    w = np.linalg.solve(X.T @ X + reg, X.T @ library[:, r, q, j])
-                    regress[r, q, j] = np.r_[1.0, ctrl[r, q, :TAIL]] @ w
+                W = np.linalg.solve(X.T @ X + reg, X.T @ library[:, r, q, TAIL:])     # every tail value at once
+                regress[r, q, TAIL:] = np.r_[1.0, ctrl[r, q, :TAIL]] @ W
         steps[:, :, TAIL:] = ctrl[:, :, TAIL - 1:TAIL] + mean[:, :, TAIL:] - mean[:, :, TAIL - 1:TAIL]
         oracle[:, :, TAIL:] = fitted[:, :, TAIL:]
         row = {k: ratio(c) for k, c in (("as-is", ctrl), ("regress", regress), ("lib-steps", steps),
