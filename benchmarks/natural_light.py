@@ -52,7 +52,7 @@ import sys
 import numpy as np
 
 from experiments import DATA, make_case, run_on_cluster
-from mi_dsbrdf.model.build import GMM, gmm_structure
+from mi_dsbrdf.model.build import DEFAULT_K, GMM, gmm_structure
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "benchmarks", "results", "natural_light")
@@ -116,17 +116,20 @@ def parse_config(items) -> dict:
     return out
 
 
-def setting_name(config, gmm=None) -> str:
+def setting_name(config, gmm=None, bases=None) -> str:
     """``w_gmm100-w_gradient30000``, with ``gmm-full-2-0.01-`` before it for a GMM
-    structure other than the build's; ``defaults`` for neither."""
+    structure other than the build's and ``bases12-`` before that for another number
+    of bases; ``defaults`` for none of them."""
     name = "-".join("%s%g" % (k, v) for k, v in sorted(config.items()))
     if gmm is not None:
         name = "-".join(["gmm"] + [str(p) for p in gmm_structure(gmm)] + ([name] if name else []))
+    if bases is not None:
+        name = "-".join(["bases%d" % bases] + ([name] if name else []))
     return name or "defaults"
 
 
 def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=None, exposure=1.0,
-          photons=None) -> list:
+          photons=None, bases=None) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
     mats = [m for m in mats if materials is None or m in materials]
@@ -136,6 +139,8 @@ def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=N
     if photons:
         truth["photons"] = photons
     extra = dict(truth) if gmm is None else dict(truth, gmm=gmm)
+    if bases is not None:
+        extra["bases"] = bases
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
     for method in ("principled-adam", "dsbrdf-adam") if adam else ():      # after this tool's cases
@@ -352,13 +357,17 @@ def against_table(folder, reference) -> str:
 
 
 def parse_setting(name) -> tuple:
-    """(GMM structure or None, Config overrides) of a :func:`setting_name`."""
+    """(GMM structure or None, Config overrides, number of bases or None) of a
+    :func:`setting_name`."""
     parts = [] if name == "defaults" else name.split("-")
+    bases = None
+    if re.fullmatch(r"bases[0-9]+", parts[0] if parts else ""):
+        bases, parts = int(parts[0][5:]), parts[1:]
     gmm = None
     if parts[:1] == ["gmm"]:
         n = 2 if parts[1] == "bic" else 4
         gmm, parts = ":".join(parts[1:n]), parts[n:]
-    return gmm, parse_config(parts)
+    return gmm, parse_config(parts), bases
 
 
 def choose(root=SWEEP, n_cases=None, command="--choose", reference=None) -> dict:
@@ -407,7 +416,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None) -> dict
     best = min(allowed, key=lambda k: complete[k]["score"])
     for name, v in complete.items():
         v["against_best"] = paired_against(os.path.join(root, name), os.path.join(root, best))
-    gmm, config = parse_setting(best)
+    gmm, config, bases = parse_setting(best)
     rule = "lowest mean over the measures of the median ratio to doing nothing"
     if reference is not None:
         rule += (", among the settings with no fewer wins on each measure and no fewer near-Lambertian cases "
@@ -416,6 +425,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None) -> dict
     return {"command": "python benchmarks/natural_light.py " + command, "measures": list(CHOICE_MEASURES),
             "rule": rule, "cases": n_cases, "best": best, "best_config": config,
             "best_gmm": GMM if gmm is None else gmm,     # defaults: the build's structure
+            "best_bases": DEFAULT_K if bases is None else bases,
             "reference": reference,
             "settings": complete,
             "overruled": barred,
@@ -511,6 +521,8 @@ def main(argv=None):
     ap.add_argument("--gmm", default=None, metavar="STRUCTURE",
                     help="the leave-one-out models' GMM structure, e.g. full:2:0.01 (validation only; "
                          "default the build's)")
+    ap.add_argument("--bases", type=int, default=None, metavar="K",
+                    help="the leave-one-out models' number of bases (validation only; default the build's)")
     ap.add_argument("--adam", action="store_true", help="principled + Adam and DSBRDF + Adam beside")
     ap.add_argument("--summary", action="store_true", help="only print the tables of finished cases")
     ap.add_argument("--report", action="store_true", help="write docs/natural_light.{md,png} from the results")
@@ -560,9 +572,9 @@ def main(argv=None):
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
         return
     config = parse_config(args.config)
-    if (config or args.gmm or args.materials) and args.set == "report":     # the truth's sampling is a measure
+    if (config or args.gmm or args.bases or args.materials) and args.set == "report":     # the truth's sampling is a measure
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
-    name = setting_name(config, args.gmm)
+    name = setting_name(config, args.gmm, args.bases)
     if not (np.isfinite(args.exposure) and args.exposure > 0):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
     if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
@@ -574,7 +586,7 @@ def main(argv=None):
         if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         run_on_cluster(cases(args.set, config, args.adam, args.gmm, args.truth_samples, args.materials,
-                             args.exposure, args.photons), out,
+                             args.exposure, args.photons, args.bases), out,
                        args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))

@@ -566,3 +566,27 @@ def test_choose_gmm_takes_the_guards_reference_from_the_command_line():
     two, ref = choice["settings"]["start_candidates2"], choice["settings"]["start_candidates1"]
     assert ref["score"] - natural_light.SCORE_NOISE < two["score"] < choice["settings"][choice["best"]]["score"]
     assert two["seconds_median"] > natural_light.TIME_RATIO * ref["seconds_median"]
+
+
+def test_natural_light_setting_names_carry_the_number_of_bases():
+    """A setting's folder name says its model's number of bases, GMM structure and
+    Config overrides, and reads back to them; the build's structure is left out."""
+    import natural_light
+    name = natural_light.setting_name({"w_gmm": 100}, "full:2:0.01", 14)
+    assert name == "bases14-gmm-full-2-0.01-w_gmm100"
+    assert natural_light.parse_setting(name) == ("full:2:0.01", {"w_gmm": 100}, 14)
+    assert natural_light.parse_setting("bases7") == (None, {}, 7)
+    assert natural_light.parse_setting("defaults") == (None, {}, None)
+    assert natural_light.setting_name({}) == "defaults"
+    cases = natural_light.cases("validation", bases=14, materials=["teflon"])
+    assert cases and all(c["bases"] == 14 for c in cases)
+    assert all("bases" not in c for c in natural_light.cases("validation", materials=["teflon"]))
+
+
+def test_loo_model_with_another_number_of_bases(tmp_path):
+    """``loo_model(..., k=)`` builds a leave-one-out model with k bases and a GMM in
+    k dimensions, cached apart from the build's k."""
+    m = ev.loo_model("teflon", str(tmp_path), k=6)           # from the shipped model's stored fits
+    assert m.basis.bases.shape[0] == 6 and "teflon" not in m.library and len(m.library) == 99
+    assert m.gmm.means.shape[1] == 6
+    assert len(glob.glob(str(tmp_path / "*-k6.npz"))) == 1

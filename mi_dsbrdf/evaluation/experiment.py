@@ -10,6 +10,7 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      (probes: the model's mean material under a constant map, the do-nothing baseline),
      "spp": samples per pixel (Adam methods), "gmm": the leave-one-out model's GMM
      structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's),
+     "bases": the leave-one-out model's number of bases k (optional; default the build's),
      "truth_samples": directions per texel side of the probe's truth render (optional, default 1:
      the texel centres; the probe's map integrated over each texel's footprint as s x s directions),
      "exposure": the rendered image's factor (optional, probes, default 1: the result must not
@@ -82,7 +83,7 @@ from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.model import model_file as model_data
-from mi_dsbrdf.model.build import GMM, build_from_fits, gmm_structure, save_model, stored_fits
+from mi_dsbrdf.model.build import DEFAULT_K, GMM, build_from_fits, gmm_structure, save_model, stored_fits
 from mi_dsbrdf.model.samples import samples_from_table
 
 #: probes used for relighting (the first two that differ from the case's probe)
@@ -140,19 +141,20 @@ def shot_noise(image, mask, photons, seed) -> np.ndarray:
     return rng.poisson(np.maximum(img, 0.0) / unit) * unit
 
 
-def loo_model(name, cache, gmm=None):
+def loo_model(name, cache, gmm=None, k=None):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
     library from the other 99 fits; the GMM of structure ``gmm``, default the
-    build's, :func:`~mi_dsbrdf.model.build.gmm_structure`), cached as
-    ``cache/loo-<name>-<h>-<gmm>.npz``, h the first 12 hex digits of the shipped
-    model file's SHA-256, so that a rebuilt model never reuses a leave-one-out
-    model of the one before)."""
+    build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
+    the build's ``DEFAULT_K``), cached as ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``,
+    h the first 12 hex digits of the shipped model file's SHA-256, so that a
+    rebuilt model never reuses a leave-one-out model of the one before)."""
     gmm = GMM if gmm is None else gmm
-    tag = "-".join(map(str, gmm_structure(gmm)))
+    k = DEFAULT_K if k is None else int(k)
+    tag = "-".join(map(str, gmm_structure(gmm))) + ("" if k == DEFAULT_K else "-k%d" % k)
     path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, shipped_model_hash(), tag))
     if not os.path.exists(path):
         fits = stored_fits(model_data.shipped_model().arrays)
-        save_model(path, build_from_fits(fits, exclude=[name], refit=False, progress=False, gmm=gmm))    # atomic
+        save_model(path, build_from_fits(fits, k=k, exclude=[name], refit=False, progress=False, gmm=gmm))  # atomic
     return model_data.load_model(path)
 
 
@@ -211,7 +213,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
     name = case["material"]
     res, (H, W) = case["res"], case.get("map", (16, 32))
-    model = loo_model(name, cache, case.get("gmm"))
+    model = loo_model(name, cache, case.get("gmm"), case.get("bases"))
     samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, name))
     merl = {"type": "merl", "nbrdf": nbrdf, "material": name}
     shape = case.get("shape", "sphere")
