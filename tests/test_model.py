@@ -205,3 +205,33 @@ def test_a_model_built_in_memory_drives_the_plugin_and_inference():
     np.testing.assert_allclose(post.material(psi, np.zeros((mem.basis.n_lobes, 2))).log_kappa,
                                Material.from_basis(shipped.basis, 2 * psi, np.full((3, 3), 1 / 3)).log_kappa)
     assert ts.bsdf is s.shapes()[0].bsdf()         # the caller's view keeps its own BSDF
+
+
+def test_refitted_library_fits_its_materials_better_than_fpca_scores():
+    """build_from_fits(refit=True) (what a build and the benchmarks' refitted
+    leave-one-out models do) refits each kept material in the basis from its FPCA
+    score: its fit objective is no higher than the score's, and psi moves."""
+    from conftest import data_path
+    from mi_dsbrdf.brdf.curves import CurveBasis
+    from mi_dsbrdf.model.fitting import OBJECTIVE
+    nbrdf = data_path("merl", "merl_nbrdf_weights.npz")
+    fits = build_model.stored_fits(model_data.shipped_model().arrays)
+    keep = [list(fits["names"]).index(n) for n in ("teflon", "nickel", "blue-fabric", "gold-metallic-paint",
+                                                    "pink-felt", "alum-bronze")]
+    sub = {k: [v[i] for i in keep] if k == "flags" else np.asarray(v)[keep] for k, v in fits.items()}
+    sub["names"] = [str(n) for n in sub["names"]]
+    kw = dict(k=3, exclude=["alum-bronze"], workers=1, progress=False, gmm="diag:1:0.01")
+    scores = build_model.build_from_fits(sub, refit=False, **kw)
+    refits = build_model.build_from_fits(sub, refit=True, source=nbrdf, **kw)
+    assert list(refits["library_names"]) == sub["names"][:5]
+    assert np.abs(scores["library_psi"] - refits["library_psi"]).max() > 1e-2
+    for i, name in enumerate(refits["library_names"]):
+        samples = build_model.load_samples(nbrdf, str(name))
+        target = OBJECTIVE.logs(samples.values, samples.cos_i)
+        cost = []
+        for a in (scores, refits):
+            m = Material.from_basis(CurveBasis(a["mean"], a["bases"], a["knots"]), a["library_psi"][i],
+                                    a["library_chroma"][i])
+            cost.append(float(((OBJECTIVE.logs(m.eval(samples.theta_h, samples.theta_d), samples.cos_i)
+                                - target) ** 2).sum()))
+        assert np.isfinite(cost).all() and cost[1] <= cost[0] * 1.0001, (str(name), cost)
