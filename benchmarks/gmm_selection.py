@@ -20,8 +20,10 @@ the synthetic map test lost to a constant map by 2 %.
 
     .venv/bin/python benchmarks/gmm_selection.py [--workers 2]
 
-About 3 minutes on 2 cores. The psi are the shipped library's (its basis); a
-leave-one-out model also refits the basis, which this does not.
+About 3 minutes on 2 cores. The psi are the materials' FPCA scores in the
+shipped basis, the data a build fits the GMM to (before the seventeenth session
+the library's refits, which the GMM was then fitted to); a leave-one-out model
+also refits the basis, which this does not.
 """
 from __future__ import annotations
 
@@ -58,9 +60,12 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
     import mi_dsbrdf  # noqa: F401
+    from mi_dsbrdf.model.build import stored_fits
+    from mi_dsbrdf.model.fpca import fpca
     from mi_dsbrdf.model.model_file import shipped_model
     model = shipped_model()
-    X = np.stack([model.library_material(n).psi for n in model.library])
+    # the priors' data: the materials' FPCA scores in the shipped basis (a build fits the GMM to them)
+    X = fpca(stored_fits(model.arrays)["controls"]).scores[:, :model.basis.n_bases]
     jobs = [(X, ct, c, reg) for ct, c, reg in itertools.product(COVARIANCES, COMPONENTS, REGS)]
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(pool.map(_score, jobs))

@@ -48,11 +48,10 @@ import json
 import os
 import re
 import sys
-import time
 
 import numpy as np
 
-from experiments import CACHE, DATA, make_case, run_on_cluster
+from experiments import DATA, make_case, run_on_cluster
 from mi_dsbrdf.model.build import DEFAULT_K, GMM, gmm_structure
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -117,23 +116,20 @@ def parse_config(items) -> dict:
     return out
 
 
-def setting_name(config, gmm=None, bases=None, refit=False) -> str:
+def setting_name(config, gmm=None, bases=None) -> str:
     """``w_gmm100-w_gradient30000``, with ``gmm-full-2-0.01-`` before it for a GMM
-    structure other than the build's, ``bases12-`` before that for another number
-    of bases and ``refit-`` first for leave-one-out libraries refitted in their
-    basis; ``defaults`` for none of them."""
+    structure other than the build's and ``bases12-`` before that for another number
+    of bases; ``defaults`` for none of them."""
     name = "-".join("%s%g" % (k, v) for k, v in sorted(config.items()))
     if gmm is not None:
         name = "-".join(["gmm"] + [str(p) for p in gmm_structure(gmm)] + ([name] if name else []))
     if bases is not None:
         name = "-".join(["bases%d" % bases] + ([name] if name else []))
-    if refit:
-        name = "-".join(["refit"] + ([name] if name else []))
     return name or "defaults"
 
 
 def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=None, exposure=1.0,
-          photons=None, bases=None, refit=False) -> list:
+          photons=None, bases=None) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
     mats = [m for m in mats if materials is None or m in materials]
@@ -145,26 +141,12 @@ def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=N
     extra = dict(truth) if gmm is None else dict(truth, gmm=gmm)
     if bases is not None:
         extra["bases"] = bases
-    if refit:
-        extra["refit"] = True
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
     for method in ("principled-adam", "dsbrdf-adam") if adam else ():      # after this tool's cases
         out += [make_case(which, "probe", m, True, probe=p, method=method, iters=ADAM_ITERS, spp=ADAM_SPP, **truth)
                 for m in mats for p in probes]
     return out
-
-
-def build_loo_models(materials, data, gmm=None, bases=None, workers=2) -> None:
-    """The refitted leave-one-out models of ``materials`` (:func:`~mi_dsbrdf.evaluation.experiment.loo_model`
-    with a source), built in turn on ``workers`` processes before the cases run."""
-    from mi_dsbrdf.evaluation.experiment import loo_model
-    nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
-    for i, m in enumerate(materials):
-        t0 = time.perf_counter()
-        loo_model(m, CACHE, gmm, bases, source=nbrdf, workers=workers)
-        print("[%d/%d] leave-one-out model without %s, refitted: %.0f s" % (i + 1, len(materials), m,
-                                                                            time.perf_counter() - t0), flush=True)
 
 
 def load_results(folder) -> list:
@@ -375,19 +357,17 @@ def against_table(folder, reference) -> str:
 
 
 def parse_setting(name) -> tuple:
-    """(GMM structure or None, Config overrides, the leave-one-out models' other
-    options: {"refit": True, "bases": k} or fewer) of a :func:`setting_name`."""
+    """(GMM structure or None, Config overrides, number of bases or None) of a
+    :func:`setting_name`."""
     parts = [] if name == "defaults" else name.split("-")
-    model = {}
-    if parts[:1] == ["refit"]:
-        model["refit"], parts = True, parts[1:]
+    bases = None
     if re.fullmatch(r"bases[0-9]+", parts[0] if parts else ""):
-        model["bases"], parts = int(parts[0][5:]), parts[1:]
+        bases, parts = int(parts[0][5:]), parts[1:]
     gmm = None
     if parts[:1] == ["gmm"]:
         n = 2 if parts[1] == "bic" else 4
         gmm, parts = ":".join(parts[1:n]), parts[n:]
-    return gmm, parse_config(parts), model
+    return gmm, parse_config(parts), bases
 
 
 def choose(root=SWEEP, n_cases=None, command="--choose", reference=None) -> dict:
@@ -436,7 +416,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None) -> dict
     best = min(allowed, key=lambda k: complete[k]["score"])
     for name, v in complete.items():
         v["against_best"] = paired_against(os.path.join(root, name), os.path.join(root, best))
-    gmm, config, model = parse_setting(best)
+    gmm, config, bases = parse_setting(best)
     rule = "lowest mean over the measures of the median ratio to doing nothing"
     if reference is not None:
         rule += (", among the settings with no fewer wins on each measure and no fewer near-Lambertian cases "
@@ -445,7 +425,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None) -> dict
     return {"command": "python benchmarks/natural_light.py " + command, "measures": list(CHOICE_MEASURES),
             "rule": rule, "cases": n_cases, "best": best, "best_config": config,
             "best_gmm": GMM if gmm is None else gmm,     # defaults: the build's structure
-            "best_bases": model.get("bases", DEFAULT_K), "best_refit": model.get("refit", False),
+            "best_bases": DEFAULT_K if bases is None else bases,
             "reference": reference,
             "settings": complete,
             "overruled": barred,
@@ -543,9 +523,6 @@ def main(argv=None):
                          "default the build's)")
     ap.add_argument("--bases", type=int, default=None, metavar="K",
                     help="the leave-one-out models' number of bases (validation only; default the build's)")
-    ap.add_argument("--refit", action="store_true",
-                    help="leave-one-out models whose library is refitted in their basis, as a build does "
-                         "(~2 min a material, built first; validation only; default the FPCA scores)")
     ap.add_argument("--adam", action="store_true", help="principled + Adam and DSBRDF + Adam beside")
     ap.add_argument("--summary", action="store_true", help="only print the tables of finished cases")
     ap.add_argument("--report", action="store_true", help="write docs/natural_light.{md,png} from the results")
@@ -595,9 +572,9 @@ def main(argv=None):
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
         return
     config = parse_config(args.config)
-    if (config or args.gmm or args.bases or args.refit or args.materials) and args.set == "report":     # the truth's sampling is a measure
+    if (config or args.gmm or args.bases or args.materials) and args.set == "report":     # the truth's sampling is a measure
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
-    name = setting_name(config, args.gmm, args.bases, args.refit)
+    name = setting_name(config, args.gmm, args.bases)
     if not (np.isfinite(args.exposure) and args.exposure > 0):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
     if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
@@ -608,11 +585,8 @@ def main(argv=None):
     if not (args.summary or args.report):
         if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
-        todo = cases(args.set, config, args.adam, args.gmm, args.truth_samples, args.materials, args.exposure,
-                     args.photons, args.bases, args.refit)
-        if args.refit:                  # the refits use every worker; the cases' processes then find them built
-            build_loo_models(sorted({c["material"] for c in todo}), args.data, args.gmm, args.bases, args.workers)
-        run_on_cluster(todo, out,
+        run_on_cluster(cases(args.set, config, args.adam, args.gmm, args.truth_samples, args.materials,
+                             args.exposure, args.photons, args.bases), out,
                        args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))

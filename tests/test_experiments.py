@@ -568,21 +568,19 @@ def test_choose_gmm_takes_the_guards_reference_from_the_command_line():
     assert two["seconds_median"] > natural_light.TIME_RATIO * ref["seconds_median"]
 
 
-def test_natural_light_setting_names_carry_the_leave_one_out_models_options():
-    """A setting's folder name says whether its models' libraries are refitted, their
-    number of bases, GMM structure and Config overrides, and reads back to them; the
-    build's structure is left out."""
+def test_natural_light_setting_names_carry_the_number_of_bases():
+    """A setting's folder name says its models' number of bases, GMM structure and
+    Config overrides, and reads back to them; the build's structure is left out."""
     import natural_light
-    name = natural_light.setting_name({"w_gmm": 100}, "full:2:0.01", 14, refit=True)
-    assert name == "refit-bases14-gmm-full-2-0.01-w_gmm100"
-    assert natural_light.parse_setting(name) == ("full:2:0.01", {"w_gmm": 100}, {"bases": 14, "refit": True})
-    assert natural_light.parse_setting("bases7") == (None, {}, {"bases": 7})
-    assert natural_light.parse_setting("refit") == (None, {}, {"refit": True})
-    assert natural_light.parse_setting("defaults") == (None, {}, {})
+    name = natural_light.setting_name({"w_gmm": 100}, "full:2:0.01", 14)
+    assert name == "bases14-gmm-full-2-0.01-w_gmm100"
+    assert natural_light.parse_setting(name) == ("full:2:0.01", {"w_gmm": 100}, 14)
+    assert natural_light.parse_setting("bases7") == (None, {}, 7)
+    assert natural_light.parse_setting("defaults") == (None, {}, None)
     assert natural_light.setting_name({}) == "defaults"
-    cases = natural_light.cases("validation", bases=14, refit=True, materials=["teflon"])
-    assert cases and all(c["bases"] == 14 and c["refit"] for c in cases)
-    assert all("bases" not in c and "refit" not in c for c in natural_light.cases("validation", materials=["teflon"]))
+    cases = natural_light.cases("validation", bases=14, materials=["teflon"])
+    assert cases and all(c["bases"] == 14 for c in cases)
+    assert all("bases" not in c for c in natural_light.cases("validation", materials=["teflon"]))
 
 
 def test_loo_model_with_another_number_of_bases(tmp_path):

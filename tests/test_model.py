@@ -207,10 +207,12 @@ def test_a_model_built_in_memory_drives_the_plugin_and_inference():
     assert ts.bsdf is s.shapes()[0].bsdf()         # the caller's view keeps its own BSDF
 
 
-def test_refitted_library_fits_its_materials_better_than_fpca_scores():
-    """build_from_fits(refit=True) (what a build and the benchmarks' refitted
-    leave-one-out models do) refits each kept material in the basis from its FPCA
-    score: its fit objective is no higher than the score's, and psi moves."""
+def test_refitted_library_fits_better_and_the_priors_stay_on_the_scores():
+    """build_from_fits(refit=True) (what a build does) refits each kept material in
+    the basis from its FPCA score: its fit objective is no higher than the score's
+    and psi moves; the priors (GMM, hue) are fitted to the FPCA scores and the full
+    fits' chromaticities either way, so a fast leave-one-out model (refit=False) has
+    the build's priors."""
     from conftest import data_path
     from mi_dsbrdf.brdf.curves import CurveBasis
     from mi_dsbrdf.model.fitting import OBJECTIVE
@@ -225,6 +227,8 @@ def test_refitted_library_fits_its_materials_better_than_fpca_scores():
     refits = build_model.build_from_fits(sub, refit=True, source=nbrdf, **kw)
     assert list(refits["library_names"]) == sub["names"][:5]
     assert np.abs(scores["library_psi"] - refits["library_psi"]).max() > 1e-2
+    for key in ("gmm_weights", "gmm_means", "gmm_covariances", "hue_kappa"):
+        np.testing.assert_array_equal(scores[key], refits[key])
     for i, name in enumerate(refits["library_names"]):
         samples = build_model.load_samples(nbrdf, str(name))
         target = OBJECTIVE.logs(samples.values, samples.cos_i)

@@ -11,8 +11,6 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      "spp": samples per pixel (Adam methods), "gmm": the leave-one-out model's GMM
      structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's),
      "bases": the leave-one-out model's number of bases k (optional; default the build's),
-     "refit": the leave-one-out model's library refitted in its basis (optional, default
-     False: the FPCA scores; :func:`loo_model`),
      "truth_samples": directions per texel side of the probe's truth render (optional, default 1:
      the texel centres; the probe's map integrated over each texel's footprint as s x s directions),
      "exposure": the rendered image's factor (optional, probes, default 1: the result must not
@@ -143,31 +141,25 @@ def shot_noise(image, mask, photons, seed) -> np.ndarray:
     return rng.poisson(np.maximum(img, 0.0) / unit) * unit
 
 
-def loo_model(name, cache, gmm=None, k=None, source=None, workers=1):
+def loo_model(name, cache, gmm=None, k=None):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
     library from the other 99 fits; the GMM of structure ``gmm``, default the
     build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
-    the build's ``DEFAULT_K``), cached as
-    ``cache/loo-<name>-<h>-<gmm>[-k<k>][-refit].npz``, h the first 12 hex digits
-    of the shipped model file's SHA-256, so that a rebuilt model never reuses a
-    leave-one-out model of the one before.
+    the build's ``DEFAULT_K``), cached as ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``,
+    h the first 12 hex digits of the shipped model file's SHA-256, so that a
+    rebuilt model never reuses a leave-one-out model of the one before).
 
-    Without ``source`` the library's psi are the kept fits' FPCA scores (seconds;
-    every natural-light result before the seventeenth session). With ``source``
-    (the MERL measurements the build read) every kept material is refitted in the
-    leave-one-out basis, as ``mi-dsbrdf build-model`` does (~2 min on two
-    ``workers``): the psi the GMM is fitted to are then the ones a user's build
-    has.
+    The library is not refitted in the leave-one-out basis (its psi are the FPCA
+    scores; seconds instead of minutes): inference does not use it, and the
+    priors, as in a build, are fitted to the scores.
     """
     gmm = GMM if gmm is None else gmm
     k = DEFAULT_K if k is None else int(k)
     tag = "-".join(map(str, gmm_structure(gmm))) + ("" if k == DEFAULT_K else "-k%d" % k)
-    tag += "" if source is None else "-refit"
     path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, shipped_model_hash(), tag))
     if not os.path.exists(path):
         fits = stored_fits(model_data.shipped_model().arrays)
-        save_model(path, build_from_fits(fits, k=k, exclude=[name], source=source, refit=source is not None,
-                                         workers=workers, progress=False, gmm=gmm))    # atomic
+        save_model(path, build_from_fits(fits, k=k, exclude=[name], refit=False, progress=False, gmm=gmm))  # atomic
     return model_data.load_model(path)
 
 
@@ -226,7 +218,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
     name = case["material"]
     res, (H, W) = case["res"], case.get("map", (16, 32))
-    model = loo_model(name, cache, case.get("gmm"), case.get("bases"), nbrdf if case.get("refit") else None)
+    model = loo_model(name, cache, case.get("gmm"), case.get("bases"))
     samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, name))
     merl = {"type": "merl", "nbrdf": nbrdf, "material": name}
     shape = case.get("shape", "sphere")
