@@ -99,6 +99,27 @@ def test_model_file_priors_load(tmp_path):
     assert np.isfinite(m.chromaticity_prior.nll(np.full((m.basis.n_lobes, 3), 1 / 3)))
 
 
+def test_the_chromaticity_prior_learns_from_the_library_materials_full_fits(tmp_path):
+    """Like the GMM and the hue prior, the chromaticity prior's data are the full
+    fits' chromaticities of the library's materials (not of an excluded one), so a
+    leave-one-out model without refits has the build's kind of prior; a file
+    without the fits learns from its library."""
+    from mi_dsbrdf.model.priors import ChromaticityPrior
+    a = dict(np.load(_arrays(tmp_path)))
+    fit_names = [str(n) for n in a["fit_names"]]
+    rows = [fit_names.index(str(n)) for n in a["library_names"]]
+    a["library_chroma"] = a["library_chroma"][..., ::-1].copy()        # not the fits' any more
+    p = tmp_path / "moved.npz"
+    np.savez(p, **a)
+    x = np.array([[0.5, 0.3, 0.2], [0.2, 0.3, 0.5], [1 / 3, 1 / 3, 1 / 3]])[:a["library_chroma"].shape[1]]
+    got = load_model(p).chromaticity_prior.nll(x)
+    assert got == ChromaticityPrior(a["fit_chroma"][rows]).nll(x)
+    assert got != ChromaticityPrior(a["library_chroma"]).nll(x)
+    del a["fit_chroma"]
+    np.savez(p, **a)
+    assert load_model(p).chromaticity_prior.nll(x) == ChromaticityPrior(a["library_chroma"]).nll(x)
+
+
 def test_a_library_too_small_for_the_chromaticity_prior_fails_only_when_it_is_used(tmp_path):
     """A model of two materials loads (test_render renders with one); only the
     chromaticity prior of the colour split, a density learned from the library,

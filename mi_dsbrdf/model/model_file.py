@@ -16,7 +16,8 @@ and the priors
     hue_kappa   ()                                                  Eq. 7-12
 
 (the chromaticity prior, :class:`~mi_dsbrdf.model.priors.ChromaticityPrior`,
-is learned from ``library_chroma`` on first use),
+is learned on first use from the library materials' ``fit_chroma``, or
+``library_chroma`` in a file without the fits),
 plus what the build keeps for leave-one-out rebuilds and reports (written by
 :mod:`mi_dsbrdf.model.build`): ``fpca_bases``, ``fpca_variance``, the full fits
 ``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_flags``, their Eq. 5 errors on
@@ -102,9 +103,17 @@ class ReflectanceModel:
     def chromaticity_prior(self) -> ChromaticityPrior:
         """The chromaticity prior learned from the library (built on first use:
         only the colour split under a map needs it, so a small model still loads
-        and serves point lights or inference with the split off)."""
+        and serves point lights or inference with the split off). Its data, like
+        the other priors' (:func:`~mi_dsbrdf.model.build.build_from_fits`), are
+        the library materials' full fits' chromaticities where the file holds
+        them, else the library's own."""
+        chroma = np.stack([c for _, c in self.library.values()])
+        if "fit_names" in self.arrays and "fit_chroma" in self.arrays:
+            row = {str(n): i for i, n in enumerate(self.arrays["fit_names"])}
+            if all(n in row for n in self.library):
+                chroma = np.asarray(self.arrays["fit_chroma"])[[row[n] for n in self.library]]
         try:
-            return ChromaticityPrior(np.stack([c for _, c in self.library.values()]))
+            return ChromaticityPrior(chroma)
         except ValueError as e:
             raise ModelError("%s: bad chromaticity prior: %s (the colour split needs it: turn the split off "
                              "with --no-colour-split, or Config.with_colour_split(False))" % (self.source, e)) from None
