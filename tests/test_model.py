@@ -99,25 +99,30 @@ def test_model_file_priors_load(tmp_path):
     assert np.isfinite(m.chromaticity_prior.nll(np.full((m.basis.n_lobes, 3), 1 / 3)))
 
 
-def test_the_chromaticity_prior_learns_from_the_library_materials_full_fits(tmp_path):
-    """Like the GMM and the hue prior, the chromaticity prior's data are the full
-    fits' chromaticities of the library's materials (not of an excluded one), so a
-    leave-one-out model without refits has the build's kind of prior; a file
-    without the fits learns from its library."""
+def test_the_priors_data_are_the_scores_and_full_fits_colours_else_the_library(tmp_path):
+    """A build stores the priors' data (``prior_psi``: the FPCA scores, ``prior_chroma``:
+    the full fits' chromaticities); the chromaticity prior learns from them, and a
+    file without them falls back to its library. Malformed ones are named."""
     from mi_dsbrdf.model.priors import ChromaticityPrior
     a = dict(np.load(_arrays(tmp_path)))
-    fit_names = [str(n) for n in a["fit_names"]]
-    rows = [fit_names.index(str(n)) for n in a["library_names"]]
-    a["library_chroma"] = a["library_chroma"][..., ::-1].copy()        # not the fits' any more
+    np.testing.assert_array_equal(a["prior_psi"], a["library_psi"])        # no refits: the same data
+    a["library_chroma"] = a["library_chroma"][..., ::-1].copy()            # no longer the priors' data
     p = tmp_path / "moved.npz"
     np.savez(p, **a)
-    x = np.array([[0.5, 0.3, 0.2], [0.2, 0.3, 0.5], [1 / 3, 1 / 3, 1 / 3]])[:a["library_chroma"].shape[1]]
-    got = load_model(p).chromaticity_prior.nll(x)
-    assert got == ChromaticityPrior(a["fit_chroma"][rows]).nll(x)
-    assert got != ChromaticityPrior(a["library_chroma"]).nll(x)
-    del a["fit_chroma"]
+    m = load_model(p)
+    x = np.array([[0.5, 0.3, 0.2], [0.2, 0.3, 0.5], [1 / 3, 1 / 3, 1 / 3]])[:m.basis.n_lobes]
+    assert m.chromaticity_prior.nll(x) == ChromaticityPrior(a["prior_chroma"]).nll(x)
+    assert m.chromaticity_prior.nll(x) != ChromaticityPrior(a["library_chroma"]).nll(x)
+    np.testing.assert_array_equal(m.prior_psi, a["prior_psi"])
+    del a["prior_chroma"], a["prior_psi"]
     np.savez(p, **a)
-    assert load_model(p).chromaticity_prior.nll(x) == ChromaticityPrior(a["library_chroma"]).nll(x)
+    m = load_model(p)
+    assert m.chromaticity_prior.nll(x) == ChromaticityPrior(a["library_chroma"]).nll(x)
+    np.testing.assert_array_equal(m.prior_psi, a["library_psi"])
+    a["prior_psi"] = np.zeros((3, 2))
+    np.savez(p, **a)
+    with pytest.raises(ModelError, match="prior_psi must be"):
+        load_model(p)
 
 
 def test_a_library_too_small_for_the_chromaticity_prior_fails_only_when_it_is_used(tmp_path):
@@ -125,7 +130,7 @@ def test_a_library_too_small_for_the_chromaticity_prior_fails_only_when_it_is_us
     chromaticity prior of the colour split, a density learned from the library,
     says it cannot, when asked for, and how to go on without it."""
     a = dict(np.load(_arrays(tmp_path)))
-    for k in ("library_names", "library_psi", "library_chroma"):
+    for k in ("library_names", "library_psi", "library_chroma", "prior_psi", "prior_chroma"):
         a[k] = a[k][:2]
     p = tmp_path / "two.npz"
     np.savez(p, **a)
@@ -166,8 +171,9 @@ def test_shipped_priors_are_the_ones_the_benchmarks_leave_one_out_models_measure
     a = shipped().arrays
     fast = build_model.build_from_fits(build_model.stored_fits(a), refit=False, progress=False,
                                        gmm=str(a["gmm_structure"]))
-    for key in ("gmm_weights", "gmm_means", "gmm_covariances", "hue_kappa"):
+    for key in ("gmm_weights", "gmm_means", "gmm_covariances", "hue_kappa", "prior_psi", "prior_chroma"):
         np.testing.assert_allclose(fast[key], a[key], rtol=1e-9, atol=1e-12, err_msg=key)
+    assert np.abs(a["prior_psi"] - a["library_psi"]).max() > 0.1       # the library keeps its refits
 
 
 def test_library_material_by_name_renders_like_explicit_parameters():
@@ -261,7 +267,7 @@ def test_refitted_library_fits_better_and_the_priors_stay_on_the_scores():
     refits = build_model.build_from_fits(sub, refit=True, source=nbrdf, **kw)
     assert list(refits["library_names"]) == sub["names"][:5]
     assert np.abs(scores["library_psi"] - refits["library_psi"]).max() > 1e-2
-    for key in ("gmm_weights", "gmm_means", "gmm_covariances", "hue_kappa"):
+    for key in ("gmm_weights", "gmm_means", "gmm_covariances", "hue_kappa", "prior_psi", "prior_chroma"):
         np.testing.assert_array_equal(scores[key], refits[key])
     for i, name in enumerate(refits["library_names"]):
         samples = build_model.load_samples(nbrdf, str(name))

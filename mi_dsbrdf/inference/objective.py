@@ -118,10 +118,11 @@ class Posterior:
                                   n_usable / rows.size)
         else:
             self.refl = PixelView(self.view, obs, keep, self.weight)
-        # the range of the library's kappa/gamma control values: a recovered curve
-        # stays within CURVE_MARGIN of it (one image sees few theta_d; without this
-        # box the unobserved, grazing end of a curve can run off to kappa = e^60)
-        ctrl = np.stack([model.basis.control_values(model.library_material(n).psi) for n in model.library])
+        # the range of the library's kappa/gamma control values (the priors' data,
+        # model.prior_psi): a recovered curve stays within CURVE_MARGIN of it (one
+        # image sees few theta_d; without this box the unobserved, grazing end of a
+        # curve can run off to kappa = e^60)
+        ctrl = np.stack([model.basis.control_values(p) for p in model.prior_psi])
         self.curve_range = (ctrl.min(axis=0).reshape(-1) - CURVE_MARGIN, ctrl.max(axis=0).reshape(-1) + CURVE_MARGIN)
         # a box per control value still lets a lobe combine a library's largest kappa
         # with its smallest gamma: a broad lobe e^20 times brighter than any measured

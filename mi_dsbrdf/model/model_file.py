@@ -15,9 +15,14 @@ and the priors
     gmm_weights (C,), gmm_means (C, k), gmm_covariances (C, k, k)   Eq. 6
     hue_kappa   ()                                                  Eq. 7-12
 
-(the chromaticity prior, :class:`~mi_dsbrdf.model.priors.ChromaticityPrior`,
-is learned on first use from the library materials' ``fit_chroma``, or
-``library_chroma`` in a file without the fits),
+and the priors' data, what the GMM, the hue prior, the chromaticity prior
+(:class:`~mi_dsbrdf.model.priors.ChromaticityPrior`, learned on first use) and
+inference's box on the curves are fitted to (optional; a file without them
+uses the library's)
+
+    prior_psi    (M, k)        the library materials' FPCA scores
+    prior_chroma (M, R, 3)     their full fits' chromaticities
+
 plus what the build keeps for leave-one-out rebuilds and reports (written by
 :mod:`mi_dsbrdf.model.build`): ``fpca_bases``, ``fpca_variance``, the full fits
 ``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_flags``, their Eq. 5 errors on
@@ -77,6 +82,14 @@ class ReflectanceModel:
         if not (np.all(np.isfinite(psi)) and np.all(np.isfinite(chroma))):
             raise ModelError("%s: library_psi and library_chroma must be finite" % source)
         self.library = {n: (psi[i], chroma[i]) for i, n in enumerate(names)}
+        # the priors' data (the build's FPCA scores and full fits' colours), else the library's
+        self.prior_psi = np.asarray(arrays.get("prior_psi", psi), dtype=np.float64)
+        self.prior_chroma = np.asarray(arrays.get("prior_chroma", chroma), dtype=np.float64)
+        if self.prior_psi.shape != (m, k) or self.prior_chroma.shape != (m, r, 3):
+            raise ModelError("%s: prior_psi must be (%d, %d) and prior_chroma (%d, %d, 3), got %s and %s"
+                             % (source, m, k, m, r, self.prior_psi.shape, self.prior_chroma.shape))
+        if not (np.all(np.isfinite(self.prior_psi)) and np.all(np.isfinite(self.prior_chroma))):
+            raise ModelError("%s: prior_psi and prior_chroma must be finite" % source)
         self.arrays = arrays
         self.source = source
         self.gmm = None
@@ -103,17 +116,10 @@ class ReflectanceModel:
     def chromaticity_prior(self) -> ChromaticityPrior:
         """The chromaticity prior learned from the library (built on first use:
         only the colour split under a map needs it, so a small model still loads
-        and serves point lights or inference with the split off). Its data, like
-        the other priors' (:func:`~mi_dsbrdf.model.build.build_from_fits`), are
-        the library materials' full fits' chromaticities where the file holds
-        them, else the library's own."""
-        chroma = np.stack([c for _, c in self.library.values()])
-        if "fit_names" in self.arrays and "fit_chroma" in self.arrays:
-            row = {str(n): i for i, n in enumerate(self.arrays["fit_names"])}
-            if all(n in row for n in self.library):
-                chroma = np.asarray(self.arrays["fit_chroma"])[[row[n] for n in self.library]]
+        and serves point lights or inference with the split off), from the
+        priors' data ``prior_chroma``."""
         try:
-            return ChromaticityPrior(chroma)
+            return ChromaticityPrior(self.prior_chroma)
         except ValueError as e:
             raise ModelError("%s: bad chromaticity prior: %s (the colour split needs it: turn the split off "
                              "with --no-colour-split, or Config.with_colour_split(False))" % (self.source, e)) from None
