@@ -240,10 +240,11 @@ def test_gradient_prior_eps_sets_the_stiffness_of_flat_regions():
 
 
 def test_curve_penalty_bounds_each_lobes_energy_and_spares_the_library():
-    """The curve penalty: zero at every library material; positive for a psi whose
-    lobe is brighter than any library lobe at a control point (a box per control
-    value alone lets a large kappa meet a small gamma); its gradient and
-    Gauss-Newton Hessian against central differences there."""
+    """The curve penalty: zero at every material of the priors' data (the library's
+    FPCA scores, ``model.prior_psi``); positive for a psi whose lobe is brighter
+    than any of theirs at a control point (a box per control value alone lets a
+    large kappa meet a small gamma); its gradient and Gauss-Newton Hessian against
+    central differences there."""
     from mi_dsbrdf.brdf.dsbrdf import log_lobe_energy
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.inference.objective import ENERGY_MARGIN, Posterior
@@ -254,14 +255,13 @@ def test_curve_penalty_bounds_each_lobes_energy_and_spares_the_library():
     ts = TexelSum(s, s.shapes()[0], (4, 8))
     model = model_data.shipped_model()
     post = Posterior(ts, np.ones((12, 12, 3)), ts.mask, model, Config(map_size=(4, 8)))
-    names = list(model.library)
-    for name in names:
-        assert post.curve_penalty(model.library_material(name).psi)[0] == 0.0, name
-    # the library's brightest sharpest lobe at grazing theta_d, pushed brighter along psi
-    ctrl = np.stack([model.basis.control_values(model.library_material(n).psi) for n in names])
+    for psi in model.prior_psi:
+        assert post.curve_penalty(psi)[0] == 0.0
+    # the brightest sharpest lobe at grazing theta_d, pushed brighter along psi
+    ctrl = np.stack([model.basis.control_values(p) for p in model.prior_psi])
     r, j = post.R - 1, 5
     i = int(np.argmax(log_lobe_energy(ctrl[:, r, 0, j], ctrl[:, r, 1, j])[0]))
-    psi0 = model.library_material(names[i]).psi
+    psi0 = model.prior_psi[i]
     A = post.curve_map[1].reshape(post.R, 2, 6, post.k)
     d_k = log_lobe_energy(ctrl[i, r, 0, j], ctrl[i, r, 1, j])[1]
     direction = A[r, 0, j] * d_k                                      # raises that lobe's energy there
