@@ -11,9 +11,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import natural_light as nl  # noqa: E402
 from experiments import DATA, run_on_cluster  # noqa: E402
 
-if __name__ == "__main__":
-    assert os.environ.get("MI_DSBRDF_TRIAL_BOX") == "refits"
-    out = os.path.join(nl.OUT, "trial_box_refits")
-    run_on_cluster(nl.cases("validation", {}), out, DATA, 2)
-    print(nl.summary(out))
-    print(nl.against_table(out, os.path.join(nl.OUT, "validation", nl.SHIPPED_SETTING)))
+assert os.environ.get("MI_DSBRDF_TRIAL_BOX") == "refits"
+out = os.path.join(nl.OUT, "trial_box_refits")
+run_on_cluster(nl.cases("validation", {}), out, DATA, 2)
+print(nl.summary(out))
+print(nl.against_table(out, os.path.join(nl.OUT, "validation", nl.SHIPPED_SETTING)))
