@@ -157,23 +157,6 @@ def loo_model(name, cache, gmm=None, k=None):
     k = DEFAULT_K if k is None else int(k)
     tag = "-".join(map(str, gmm_structure(gmm))) + ("" if k == DEFAULT_K else "-k%d" % k)
     path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, shipped_model_hash(), tag))
-    if os.environ.get("MI_DSBRDF_TRIAL_GMM") == "refits":
-        # TRIAL (seventeenth session, reverted): the GMM from the leave-one-out library's
-        # refits (cached by the refit trial), every other prior on the scores
-        import glob
-        base, path = path, path[:-4] + "-gmmrefits.npz"
-        if not os.path.exists(path):
-            if not os.path.exists(base):
-                save_model(base, build_from_fits(stored_fits(model_data.shipped_model().arrays), k=k,
-                                                 exclude=[name], refit=False, progress=False, gmm=gmm))
-            a = dict(model_data.load_model(base).arrays)
-            ref = np.load(glob.glob(os.path.join(cache, "loo-%s-*-%s-refit.npz" % (name, tag)))[0])
-            assert [str(n) for n in ref["library_names"]] == [str(n) for n in a["library_names"]]
-            np.testing.assert_allclose(ref["bases"], a["bases"], atol=1e-9)
-            for key in ("gmm_weights", "gmm_means", "gmm_covariances"):
-                a[key] = ref[key]
-            save_model(path, a)
-        return model_data.load_model(path)
     if not os.path.exists(path):
         fits = stored_fits(model_data.shipped_model().arrays)
         save_model(path, build_from_fits(fits, k=k, exclude=[name], refit=False, progress=False, gmm=gmm))  # atomic
