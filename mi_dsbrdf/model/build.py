@@ -192,18 +192,18 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     kept = [names[i] for i in keep]
     pca = fpca(fits["controls"][keep])
     basis = pca.basis(k)
+    scores, fit_chroma = pca.scores[:, :k], fits["chroma"][keep]     # the priors' data, refit or not
     if refit:
         if source is None:
             raise ModelError("refitting in the basis needs the measurement source")
-        jobs = [(os.fspath(source), n, basis.mean, basis.bases, basis.knots, pca.scores[j, :k], fits["chroma"][i])
-                for j, (i, n) in enumerate(zip(keep, kept))]
+        jobs = [(os.fspath(source), n, basis.mean, basis.bases, basis.knots, scores[j], fit_chroma[j])
+                for j, n in enumerate(kept)]
         rows = _map(_fit_basis_job, jobs, workers, "basis refits (k=%d)" % k, progress)
         psi = np.array([r[1] for r in rows])
         chroma = np.array([r[2] for r in rows])
         err = np.array([r[3] for r in rows])                   # (M, 2): paper, cosine
     else:
-        psi, chroma, err = pca.scores[:, :k], fits["chroma"][keep], np.full((len(keep), 2), np.nan)
-    scores, fit_chroma = pca.scores[:, :k], fits["chroma"][keep]     # the priors' data, refit or not
+        psi, chroma, err = scores, fit_chroma, np.full((len(keep), 2), np.nan)
     kappa_h, n_pairs = fit_hue_concentration(fit_chroma)
     return {
         "knots": np.array(basis.knots), "mean": basis.mean, "bases": basis.bases,
