@@ -258,8 +258,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         elif method == "dsbrdf":
             ts = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)
             starts = None if case.get("start") is None else [reflectance_starts(model)[case["start"]]]
-            from mi_dsbrdf.app.recover import interior     # TRIAL: the app's pixels
-            result = recover_envmap(ts, img, interior(ts.mask), model, cfg, starts=starts)
+            result = recover_envmap(ts, img, ts.mask, model, cfg, starts=starts)
             out["seconds"] = time.perf_counter() - t0
             out["terms"] = {k: float(v) for k, v in result.log[-1].items()
                             if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
