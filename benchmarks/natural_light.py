@@ -13,7 +13,7 @@ Two disjoint sets of materials and probes:
 * **validation** (:data:`VALIDATION_MATERIALS` x :data:`VALIDATION_PROBES`): the
   only cases settings and weights are chosen on (``--set validation
   --config w_entropy=300 ...`` runs one setting into its own folder under
-  ``validation/``; ``--choose`` scores the settings of ``validation_sweep/``
+  ``validation-interior/`` (:data:`PIXELS`); ``--choose`` scores the settings of ``validation_sweep/``
   (:data:`SWEEP`) and the code of that time (:data:`SWEEP_SHIPPED`), and writes
   the choice);
 * **report** (:data:`REPORT_MATERIALS` x :data:`REPORT_PROBES`): 12 materials
@@ -32,7 +32,7 @@ off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
     .venv/bin/python benchmarks/natural_light.py --set validation --config w_entropy=300 w_gradient=300
     .venv/bin/python benchmarks/natural_light.py --choose   # scores the settings, writes the choice
     .venv/bin/python benchmarks/natural_light.py --set validation --gmm full:2:0.01   # leave-one-out GMM structure
-    .venv/bin/python benchmarks/natural_light.py --choose-gmm   # every setting under validation/ -> gmm_choice.json
+    .venv/bin/python benchmarks/natural_light.py --choose-gmm   # every setting under validation-interior/ -> gmm_choice_interior.json
     .venv/bin/python benchmarks/natural_light.py --set validation --truth-samples 4 --config texel_samples=2 \
         --materials violet-acrylic nickel   # truth from the probe integrated over each texel
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
@@ -244,9 +244,15 @@ def summary(folder) -> str:
 #: the measures a setting is chosen on (BRDF, illumination and what a user sees)
 CHOICE_MEASURES = ("brdf_eq20_paper", "illumination_error", "relight")
 CHOICE = os.path.join(OUT, "validation_choice.json")
-#: the GMM's structure and weight, chosen among the settings under ``validation/``
-#: (the shipped code is ``defaults``; the others ran with ``--gmm`` / ``--config``)
-GMM_CHOICE = os.path.join(OUT, "gmm_choice.json")
+#: every run since the eighteenth session infers from the app's pixels
+#: (:func:`mi_dsbrdf.inference.pixels.usable_pixels`: the silhouette ring dropped)
+#: and writes under ``<set>-interior...``; ``<set>/`` and its siblings hold the runs
+#: before, which kept the ring
+PIXELS = "-interior"
+#: the GMM's structure and weight, chosen among the settings under ``validation-interior/``
+#: (the shipped code is ``max_rounds3``; the others ran with ``--gmm`` / ``--config``);
+#: ``gmm_choice.json`` holds the standing of the runs that kept the silhouette ring
+GMM_CHOICE = os.path.join(OUT, "gmm_choice_interior.json")
 #: the weight sweep: every setting run before the start and the grey pass kept the
 #: lobes at the image's colour (the chromaticity start from the image was in); the
 #: weights were chosen there, and SWEEP_SHIPPED holds the code of that time on the
@@ -530,7 +536,7 @@ def main(argv=None):
                     help="score every validation setting run so far and write the choice to %s" %
                          os.path.relpath(CHOICE, ROOT))
     ap.add_argument("--choose-gmm", action="store_true",
-                    help="score every setting under validation/ (GMM structures and weights) and write the "
+                    help="score every setting under validation-interior/ (GMM structures and weights) and write the "
                          "choice to %s" % os.path.relpath(GMM_CHOICE, ROOT))
     ap.add_argument("--truth-samples", type=int, default=1, metavar="S",
                     help="render each case's truth from the probe integrated over each texel as S x S directions "
@@ -546,13 +552,13 @@ def main(argv=None):
                     help="with --summary: this setting's scores and, case by case, against SETTING (a folder "
                          "name beside it)")
     ap.add_argument("--reference", default=SHIPPED_SETTING, metavar="SETTING",
-                    help="with --choose-gmm: the wins guard's reference, a folder under validation/ "
+                    help="with --choose-gmm: the wins guard's reference, a folder under validation-interior/ "
                          "(default the shipped code's, %s)" % SHIPPED_SETTING)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
     if args.choose_gmm:
-        choice = choose(os.path.join(OUT, "validation"), command="--choose-gmm", reference=args.reference)
+        choice = choose(os.path.join(OUT, "validation" + PIXELS), command="--choose-gmm", reference=args.reference)
         write_choice(choice, GMM_CHOICE)
         print(choice_table(choice))
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(GMM_CHOICE, ROOT)))
@@ -579,7 +585,7 @@ def main(argv=None):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
     if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
         sys.exit("--photons must be a finite number > 0, got %r" % args.photons)
-    out = os.path.join(OUT, args.set + ("-truth%d" % args.truth_samples if args.truth_samples > 1 else "")
+    out = os.path.join(OUT, args.set + PIXELS + ("-truth%d" % args.truth_samples if args.truth_samples > 1 else "")
                        + ("-exposure%g" % args.exposure if args.exposure != 1.0 else "")
                        + ("-photons%g" % args.photons if args.photons else ""), name)
     if not (args.summary or args.report):

@@ -13,6 +13,7 @@ from mi_dsbrdf.evaluation import experiment as ev
 from mi_dsbrdf.evaluation import metrics
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.build import GMM, gmm_structure
+from mi_dsbrdf.inference.pixels import interior
 from mi_dsbrdf.model.samples import samples_from_function
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
@@ -150,6 +151,24 @@ def test_the_do_nothing_baseline_is_scored_like_a_method(data, tmp_path):
     bands = r["brdf_eq20_paper_by_theta_d"]
     assert sum(b["share"] for b in bands.values()) == pytest.approx(1.0)
     assert r["material"]["psi"] == [0.0] * len(r["material"]["psi"])
+
+
+def test_the_benchmarks_infer_from_the_app_s_pixels(monkeypatch, data, tmp_path):
+    """run_case hands inference the pixels of usable_pixels (the silhouette ring
+    dropped), as mi_dsbrdf.recover does, not every pixel that sees the object."""
+    seen = {}
+
+    def fake_recover_envmap(ts, img, mask, *a, **k):
+        seen["mask"], seen["object"] = np.asarray(mask), ts.mask
+        raise RuntimeError("stop")
+
+    monkeypatch.setattr(ev, "recover_envmap", fake_recover_envmap)
+    case = {"id": "p", "group": "t", "kind": "probe", "material": "gold-metallic-paint",
+            "probe": "probulator/grace.hdr", "priors": True, "res": 24, "map": (4, 8)}
+    with pytest.raises(RuntimeError, match="stop"):
+        ev.run_case(case, data, str(tmp_path / "cache"))
+    assert np.array_equal(seen["mask"], interior(seen["object"]))
+    assert seen["object"].sum() > seen["mask"].sum()
 
 
 def test_a_case_s_config_overrides_its_rounds(data, tmp_path):

@@ -6,6 +6,7 @@ import numpy as np
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.latlong import latlong_directions
+from mi_dsbrdf.inference.pixels import interior
 
 PSI = np.array([0.5, -0.3, 0.2, 0, 0, 0, 0, 0, 0, 0.1])
 
@@ -25,15 +26,6 @@ def scene(bsdf, env=None, res=32, spp=256):
     if env is not None:
         d["emitter"] = {"type": "envmap", "bitmap": mi.Bitmap(env.astype(np.float32))}
     return mi.load_dict(d)
-
-
-def interior(mask):
-    m = mask.copy()
-    m[1:] &= mask[:-1]
-    m[:-1] &= mask[1:]
-    m[:, 1:] &= mask[:, :-1]
-    m[:, :-1] &= mask[:, 1:]
-    return m
 
 
 def test_texel_sum_matches_monte_carlo_render():

@@ -119,14 +119,6 @@ def check_image(image, path="image") -> None:
         raise InputError("%s is black everywhere: nothing to recover" % path)
 
 
-def saturated(image) -> np.ndarray:
-    """(H, W) bool: pixels on a clipping plateau (a channel at the image's maximum,
-    shared by at least 4 pixels); a lone brightest pixel is a highlight, not clipping."""
-    top = image.max()
-    at_top = np.any(image >= top * (1 - 1e-6), axis=2)
-    return at_top if at_top.sum() >= 4 else np.zeros(at_top.shape, bool)
-
-
 def _inside(path, folder) -> bool:
     path, folder = os.path.realpath(path), os.path.realpath(folder)
     return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)

@@ -24,8 +24,9 @@ import math
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.recover import interior, load_inputs
+from mi_dsbrdf.app.recover import load_inputs
 from mi_dsbrdf.errors import InputError
+from mi_dsbrdf.inference.pixels import interior
 
 #: the fitted circle must cover the outline this well (intersection over union)
 MIN_IOU = 0.9

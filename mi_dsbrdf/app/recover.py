@@ -13,13 +13,14 @@ import mitsuba as mi
 import numpy as np
 from tqdm import tqdm
 
-from mi_dsbrdf.app.io import as_mask, as_radiance, check_image, check_out, read_image, read_mask, saturated
+from mi_dsbrdf.app.io import as_mask, as_radiance, check_image, check_out, read_image, read_mask
 from mi_dsbrdf.app.result import RESULT_FILES, Result
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.light import recover_light
+from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
 from mi_dsbrdf.model.model_file import shipped_model
@@ -69,10 +70,7 @@ def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=
     obj = dsbrdf_object(scene)
     ts = TexelSum(scene, obj, cfg.map_size if needs.envmap_block else (1, 1), visibility=needs.visibility,
                   samples=cfg.texel_samples if needs.envmap_block else 1)     # the re-render as inference saw it
-    keep = interior(ts.mask)
-    if user_mask is not None:
-        keep &= user_mask
-    keep &= ~saturated(obs)
+    keep = usable_pixels(ts.mask, obs, user_mask)
     if keep.sum() < MIN_PIXELS:
         raise InputError("only %d usable pixels (on the object, inside the mask, unsaturated, off the silhouette); "
                          "inference needs at least %d: use a larger image or mask" % (int(keep.sum()), MIN_PIXELS))
@@ -175,16 +173,6 @@ def _progress(progress):
         bar.set_postfix(nlp="%.4g" % row["neg_log_posterior"], refresh=False)
         bar.update()
     return report, bar.close
-
-
-def interior(mask) -> np.ndarray:
-    """(H, W) bool: pixels of ``mask`` whose four neighbours are in it too
-    (silhouette pixels also see the background)."""
-    keep = mask.copy()
-    for axis in (0, 1):
-        for shift in (1, -1):
-            keep &= np.roll(mask, shift, axis=axis)
-    return keep
 
 
 def centre(shape) -> np.ndarray:

@@ -80,6 +80,7 @@ from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_er
                                           scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.light import recover_light
+from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.model import model_file as model_data
@@ -235,7 +236,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         ts = texels(merl, res, shape=shape)
         img = render(ts, point=POINT_DISTANCE * d_true)
         ts = texels({"type": "dsbrdf"}, res, shape=shape)
-        result = recover_light(ts, img, ts.mask, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
+        result = recover_light(ts, img, usable_pixels(ts.mask, img), model, cfg, point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
         material, rows = result.material, result.log
         values = material.eval(samples.theta_h, samples.theta_d)
@@ -250,6 +251,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         img = render(ts, truth.reshape(-1, 3)) * case.get("exposure", 1.0)
         if case.get("photons"):
             img = shot_noise(img, ts.mask, case["photons"], seed=case["id"])
+        keep = usable_pixels(ts.mask, img)          # the app's pixels: the silhouette ring dropped
         if method == "mean-constant":
             # doing nothing: the model's mean material (psi = 0) under a constant map
             out["seconds"] = 0.0
@@ -258,7 +260,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         elif method == "dsbrdf":
             ts = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)
             starts = None if case.get("start") is None else [reflectance_starts(model)[case["start"]]]
-            result = recover_envmap(ts, img, ts.mask, model, cfg, starts=starts)
+            result = recover_envmap(ts, img, keep, model, cfg, starts=starts)
             out["seconds"] = time.perf_counter() - t0
             out["terms"] = {k: float(v) for k, v in result.log[-1].items()
                             if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
@@ -266,7 +268,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
             values = material.eval(samples.theta_h, samples.theta_d)
         else:
-            fit = adam_recover(img, ts.mask, res, (H, W), method, model, spp=case.get("spp", 16),
+            fit = adam_recover(img, keep, res, (H, W), method, model, spp=case.get("spp", 16),
                                iters=case.get("iters", 100), shape=shape, seed=0)
             out["seconds"] = time.perf_counter() - t0
             rows, material, recovered_map = fit["rows"], fit["bsdf"], fit["map"]
