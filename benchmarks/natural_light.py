@@ -36,6 +36,7 @@ off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
     .venv/bin/python benchmarks/natural_light.py --set validation --truth-samples 4 --config texel_samples=2 \
         --materials violet-acrylic nickel   # truth from the probe integrated over each texel
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
+    .venv/bin/python benchmarks/natural_light.py --set report --adam principled-adam   # 72 x 2 cases
     .venv/bin/python benchmarks/natural_light.py --set report --summary      # tables from the results
     .venv/bin/python benchmarks/natural_light.py --set report --truth-samples 4   # the truth integrated, ~50 min
     .venv/bin/python benchmarks/natural_light.py --set report --report       # -> docs/natural_light.{md,png}
@@ -93,6 +94,7 @@ REPORT_PROBES = ["probulator/grace.hdr", "probulator/ennis.hdr", "probulator/pis
 #: iterations took 12 s on one core at 64x64, this tool's median on the validation
 #: set is 33 s)
 ADAM_ITERS, ADAM_SPP = 400, 8
+ADAM_METHODS = ("principled-adam", "dsbrdf-adam")
 #: a measured BRDF whose peak / off-peak ratio is below this is near-Lambertian; its
 #: recovery has no highlight when its ratio is below HIGHLIGHT_LIMIT times the measured one
 NEAR_LAMBERTIAN, HIGHLIGHT_LIMIT = 1.5, 1.5
@@ -128,7 +130,7 @@ def setting_name(config, gmm=None, bases=None) -> str:
     return name or "defaults"
 
 
-def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=None, exposure=1.0,
+def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None, exposure=1.0,
           photons=None, bases=None) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
@@ -143,7 +145,7 @@ def cases(which, config=None, adam=False, gmm=None, truth_samples=1, materials=N
         extra["bases"] = bases
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
-    for method in ("principled-adam", "dsbrdf-adam") if adam else ():      # after this tool's cases
+    for method in [m for m in ADAM_METHODS if m in (adam or ())]:      # after this tool's cases
         out += [make_case(which, "probe", m, True, probe=p, method=method, iters=ADAM_ITERS, spp=ADAM_SPP, **truth)
                 for m in mats for p in probes]
     return out
@@ -529,7 +531,8 @@ def main(argv=None):
                          "default the build's)")
     ap.add_argument("--bases", type=int, default=None, metavar="K",
                     help="the leave-one-out models' number of bases (validation only; default the build's)")
-    ap.add_argument("--adam", action="store_true", help="principled + Adam and DSBRDF + Adam beside")
+    ap.add_argument("--adam", nargs="*", choices=ADAM_METHODS, default=None, metavar="METHOD",
+                    help="Adam through prb beside: principled-adam, dsbrdf-adam (no name: both)")
     ap.add_argument("--summary", action="store_true", help="only print the tables of finished cases")
     ap.add_argument("--report", action="store_true", help="write docs/natural_light.{md,png} from the results")
     ap.add_argument("--choose", action="store_true",
@@ -591,7 +594,8 @@ def main(argv=None):
     if not (args.summary or args.report):
         if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
-        run_on_cluster(cases(args.set, config, args.adam, args.gmm, args.truth_samples, args.materials,
+        adam = None if args.adam is None else (args.adam or ADAM_METHODS)
+        run_on_cluster(cases(args.set, config, adam, args.gmm, args.truth_samples, args.materials,
                              args.exposure, args.photons, args.bases), out,
                        args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))

@@ -406,6 +406,19 @@ def test_natural_light_exposure_reruns_the_same_cases_with_only_the_image_scaled
             natural_light.main(["--set", "validation", "--exposure", bad])
 
 
+def test_natural_light_runs_the_adam_methods_it_is_asked_for():
+    """``--adam`` alone: both Adam baselines after this tool's cases; ``--adam
+    principled-adam``: that one only, on the same cases."""
+    import natural_light
+    own = natural_light.cases("report")
+    both = natural_light.cases("report", adam=natural_light.ADAM_METHODS)
+    one = natural_light.cases("report", adam=["principled-adam"])
+    assert both[:len(own)] == own and one[:len(own)] == own
+    assert [c["method"] for c in both[len(own):]] == ["principled-adam"] * 72 + ["dsbrdf-adam"] * 72
+    assert [c["method"] for c in one[len(own):]] == ["principled-adam"] * 72
+    assert [(c["material"], c["probe"]) for c in one[len(own):]] == [(c["material"], c["probe"]) for c in own]
+
+
 def test_natural_light_photons_adds_the_same_shot_noise_to_the_same_cases():
     """--photons N: the same cases with the case field "photons"; the noise is
     Poisson at N photons per mean pixel (its relative spread 1/sqrt(N) there),
