@@ -32,7 +32,7 @@ off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
     .venv/bin/python benchmarks/natural_light.py --set validation --config w_entropy=300 w_gradient=300
     .venv/bin/python benchmarks/natural_light.py --choose   # scores the settings, writes the choice
     .venv/bin/python benchmarks/natural_light.py --set validation --gmm full:2:0.01   # leave-one-out GMM structure
-    .venv/bin/python benchmarks/natural_light.py --choose-gmm   # every setting under validation-interior/ -> gmm_choice_interior.json
+    .venv/bin/python benchmarks/natural_light.py --choose-gmm   # validation-interior/* -> gmm_choice_interior.json
     .venv/bin/python benchmarks/natural_light.py --set validation --truth-samples 4 --config texel_samples=2 \
         --materials violet-acrylic nickel   # truth from the probe integrated over each texel
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
@@ -94,6 +94,7 @@ REPORT_PROBES = ["probulator/grace.hdr", "probulator/ennis.hdr", "probulator/pis
 #: iterations took 12 s on one core at 64x64, this tool's median on the validation
 #: set is 33 s)
 ADAM_ITERS, ADAM_SPP = 400, 8
+#: the Adam baselines ``--adam`` runs (``--adam principled-adam``: that one only)
 ADAM_METHODS = ("principled-adam", "dsbrdf-adam")
 #: a measured BRDF whose peak / off-peak ratio is below this is near-Lambertian; its
 #: recovery has no highlight when its ratio is below HIGHLIGHT_LIMIT times the measured one

@@ -20,8 +20,8 @@ from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.light import recover_light
-from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.lobes import LobeSum
+from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
 from mi_dsbrdf.model.model_file import shipped_model
 

@@ -25,7 +25,9 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
 plugin evaluated by the texel-sum forward model; a probe at twice the
 recovered map's resolution, a point light at distance 5 with intensity 40),
 recovers it with a leave-one-out model (:func:`loo_model`: the material's own
-fit is left out of bases and priors) and scores it:
+fit is left out of bases and priors) from the pixels the app would use
+(:func:`~mi_dsbrdf.inference.pixels.usable_pixels`: the silhouette ring dropped;
+every method alike) and scores it:
 
 * ``brdf_eq20_paper``, ``brdf_eq20_cosine``: Eq. 20 on the MERL grid
   (scale-invariant) in the paper's convention, log(f + 1e-6), and the
@@ -236,7 +238,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         ts = texels(merl, res, shape=shape)
         img = render(ts, point=POINT_DISTANCE * d_true)
         ts = texels({"type": "dsbrdf"}, res, shape=shape)
-        result = recover_light(ts, img, usable_pixels(ts.mask, img), model, cfg, point=(np.zeros(3), POINT_DISTANCE))
+        result = recover_light(ts, img, usable_pixels(ts.mask, img), model, cfg,
+                               point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
         material, rows = result.material, result.log
         values = material.eval(samples.theta_h, samples.theta_d)
