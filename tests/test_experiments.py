@@ -275,7 +275,8 @@ def test_config_defaults_are_the_validation_choice():
 
 def test_the_shipped_gmm_is_the_validation_choice():
     """The GMM's structure (build.GMM, the shipped model) and weight (Config.w_gmm)
-    are those of the best setting under validation/, every one scored on the same cases."""
+    are those of the best setting under validation-interior/ (the app's pixels), every one
+    scored on the same cases."""
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.model import build, model_file
     import natural_light
