@@ -146,7 +146,7 @@ def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None
         extra["bases"] = bases
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
-    for method in [m for m in ADAM_METHODS if m in (adam or ())]:      # after this tool's cases
+    for method in [m for m in ADAM_METHODS if m in adam]:      # after this tool's cases
         out += [make_case(which, "probe", m, True, probe=p, method=method, iters=ADAM_ITERS, spp=ADAM_SPP, **truth)
                 for m in mats for p in probes]
     return out
@@ -595,7 +595,7 @@ def main(argv=None):
     if not (args.summary or args.report):
         if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
-        adam = None if args.adam is None else (args.adam or ADAM_METHODS)
+        adam = () if args.adam is None else (args.adam or ADAM_METHODS)     # --adam alone: both
         run_on_cluster(cases(args.set, config, adam, args.gmm, args.truth_samples, args.materials,
                              args.exposure, args.photons, args.bases), out,
                        args.data, args.workers)

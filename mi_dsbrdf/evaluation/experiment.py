@@ -16,8 +16,8 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      "exposure": the rendered image's factor (optional, probes, default 1: the result must not
      depend on it; another exposure reruns the case with only rounding changed),
      "photons": shot noise (optional, probes; default none): the image as photon counts, this many
-     at its mean usable pixel, Poisson-drawn (:func:`shot_noise`; a camera's raw image near
-     mid-grey holds a few thousand),
+     at the mean of the pixels that see the object (the silhouette ring included), Poisson-drawn
+     (:func:`shot_noise`; a camera's raw image near mid-grey holds a few thousand),
      "start": index into :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (optional,
      probes: run from that start alone, a diagnostic of the choice among them)}
 
@@ -150,7 +150,7 @@ def loo_model(name, cache, gmm=None, k=None):
     build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
     the build's ``DEFAULT_K``), cached as ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``,
     h the first 12 hex digits of the shipped model file's SHA-256, so that a
-    rebuilt model never reuses a leave-one-out model of the one before).
+    rebuilt model never reuses a leave-one-out model of the one before.
 
     The library is not refitted in the leave-one-out basis (its psi are the FPCA
     scores; seconds instead of minutes): inference does not use it, and the
