@@ -497,6 +497,42 @@ def test_natural_light_choose_keeps_the_shipped_code_over_a_setting_with_fewer_w
         natural_light.choose(str(tmp_path), reference="w_gmm5")
 
 
+def test_natural_light_choose_judges_a_setting_with_a_second_draw_on_both_draws(tmp_path):
+    """The second draw: a setting one win short of the reference's first draw is
+    judged on its two draws pooled against the reference's two, and chosen if it
+    has no fewer wins there; a setting without a second draw is judged on its first
+    draw against the reference's first; the ranking is by the margin to the
+    reference on the same draws."""
+    import natural_light
+
+    def write(root, folder, ratios):
+        os.makedirs(tmp_path / root / folder, exist_ok=True)
+        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
+        for case, ratio in enumerate(ratios):
+            r = {"case": {"material": "m%d" % case, "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
+                 "brdf_eq20_paper": ratio, "illumination_error": 0.8, "relight": {"pisa": 0.8}}
+            with open(tmp_path / root / folder / ("m%d.json" % case), "w") as f:
+                json.dump(r, f)
+    write("first", "defaults", [0.8, 0.8, 0.8])            # 3 BRDF wins in its first draw
+    write("second", "defaults", [0.8, 0.8, 1.2])           # a rounding took one: 5 of 6 over both
+    write("first", "w_gmm100", [0.5, 0.5, 1.1])            # one short on the first draw alone
+    write("second", "w_gmm100", [0.5, 0.5, 0.9])           # 5 of 6 pooled: no fewer
+    write("first", "w_gmm10", [0.6, 0.6, 1.1])             # one short, no second draw
+    first, second = str(tmp_path / "first"), str(tmp_path / "second")
+    assert natural_light.choose(first, reference="defaults")["best"] == "defaults"
+    choice = natural_light.choose(first, reference="defaults", second_draw=second)
+    assert choice["best"] == "w_gmm100" and set(choice["fewer_wins"]) == {"w_gmm10"}
+    pooled = choice["settings"]["w_gmm100"]
+    assert pooled["draws"] == 2 and pooled["brdf_eq20_paper"]["wins"] == 5
+    assert pooled["first_draw"]["brdf_eq20_paper"]["wins"] == 2
+    assert choice["settings"]["w_gmm10"]["draws"] == 1
+    assert "brdf_eq20_paper wins 2 < 3" in choice["fewer_wins"]["w_gmm10"]
+    assert "w_gmm100 (2 draws)" in natural_light.choice_table(choice)
+    # a reference without a second draw: every setting on its first draw
+    os.rename(tmp_path / "second" / "defaults", tmp_path / "defaults_elsewhere")
+    assert natural_light.choose(first, reference="defaults", second_draw=second)["best"] == "defaults"
+
+
 def test_the_light_colour_spreads_are_those_of_the_validation_probes(data):
     """Config.light_temperature_sigma and light_tint_sigma are the root mean square
     colour temperature and tint of the validation probes' mean light
