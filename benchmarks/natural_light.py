@@ -641,7 +641,10 @@ def main(argv=None):
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))
     if args.against:
-        print(against_table(out, os.path.join(os.path.dirname(out), args.against)))
+        against = os.path.join(os.path.dirname(out), args.against)
+        if not own_rows(load_results(against)):
+            sys.exit("--against: no results of this tool under %s" % os.path.relpath(against, ROOT))
+        print(against_table(out, against))
 
 
 if __name__ == "__main__":

@@ -441,6 +441,15 @@ def test_natural_light_photons_adds_the_same_shot_noise_to_the_same_cases():
             natural_light.main(["--set", "validation", "--photons", bad])
 
 
+def test_natural_light_summary_against_a_setting_that_has_not_run_says_so():
+    """--summary --against SETTING with no results there: one line naming the folder,
+    not a table of NaN."""
+    import natural_light
+    with pytest.raises(SystemExit, match="--against: no results of this tool under .*no-such-setting"):
+        natural_light.main(["--set", "validation", "--config", "max_rounds=3", "--summary", "--against",
+                            "no-such-setting"])
+
+
 def test_natural_light_choose_never_picks_an_overruled_setting(tmp_path):
     """A setting holding a value of natural_light.OVERRULED is scored and listed
     but not chosen, even with the lowest score; the next best is."""
