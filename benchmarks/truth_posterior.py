@@ -1,8 +1,11 @@
 """Does the posterior prefer the true material? The recovered answer against the truth's best basis fit.
 
 For each validation case (a MERL material under a probe, leave-one-out model,
-as in ``natural_light.py``) two points of the negative log posterior (Eq. 18)
-are compared term by term:
+as in ``natural_light.py``, inferred from the pixels the app uses:
+:func:`~mi_dsbrdf.inference.pixels.usable_pixels`, since the twentieth session;
+the run before, with the silhouette ring, is in
+``benchmarks/results/truth_posterior_before_interior.json``) two points of the
+negative log posterior (Eq. 18) are compared term by term:
 
 * **recovered**: what :func:`~mi_dsbrdf.inference.envmap.recover_envmap` returns
   under the shipped :class:`~mi_dsbrdf.config.Config`;
@@ -76,12 +79,14 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     from mi_dsbrdf.inference import envmap
     from mi_dsbrdf.inference.forward import apply_transport
     from mi_dsbrdf.inference.objective import Posterior
+    from mi_dsbrdf.inference.pixels import usable_pixels
     from mi_dsbrdf.model.fitting import fit_basis
     model, samples, truth, img, ts = validation_case(material, probe, data, cache, map_size, res)
     H, W = map_size
     cfg = Config(map_size=(H, W))
-    rec = envmap.recover_envmap(ts, img, ts.mask, model, cfg)
-    post = Posterior(ts, img, ts.mask, model, cfg)
+    mask = usable_pixels(ts.mask, img)         # the pixels the app infers from (since the twentieth session)
+    rec = envmap.recover_envmap(ts, img, mask, model, cfg)
+    post = Posterior(ts, img, mask, model, cfg)
     seen, small = rec.seen, ex.downsample(truth, H, W)
 
     def bins_for(log_map):                  # as recover_envmap fixes them: unseen texels at the darkest seen
