@@ -411,7 +411,8 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
     reference's two (:func:`setting_scores` of both folders: medians and wins over
     the cases of both draws), otherwise on its first draw against the reference's
     first. Settings are ranked by their score less the reference's on the same
-    draws (without a reference: by their score)."""
+    draws (without a reference: by their score); each setting's case-by-case count
+    against the best (``against_best``) is of the first draws."""
     scores = {os.path.basename(d): setting_scores(d) for d in sorted(glob.glob(os.path.join(root, "*")))
               if os.path.isdir(d)}
     n_cases = n_cases or max([v["cases"] for v in scores.values()] + [1])
