@@ -435,10 +435,8 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
                 against[k] = both
     barred = {k: why for k in complete if (why := overruled(k)) is not None}
     short, slow = {}, {}
-    for k, v in complete.items():
-        if reference is None:
-            break
-        ref = against[k]
+    for k, ref in against.items():        # empty without a reference
+        v = complete[k]
         fewer = ["%s wins %d < %d" % (m, v[m]["wins"], ref[m]["wins"]) for m in CHOICE_MEASURES
                  if v[m]["wins"] < ref[m]["wins"]]
         if v["near_lambertian_clean"] < ref["near_lambertian_clean"]:
@@ -451,7 +449,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
                        "for less than %.3f)" % (v["seconds_median"] / ref["seconds_median"], v["score"],
                                                 ref["score"], ref["score"] - SCORE_NOISE))
     for k, v in complete.items():
-        v["margin"] = v["score"] - (against[k]["score"] if reference is not None else 0.0)
+        v["margin"] = v["score"] - (against[k]["score"] if k in against else 0.0)
     allowed = [k for k in complete if k not in barred and k not in short and k not in slow]
     if not allowed:
         raise SystemExit("every complete validation setting under %s is overruled" % root)
@@ -492,9 +490,9 @@ def choice_table(choice) -> str:
     lines = ["| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
              + " | score | against the best, case by case: lower / higher (%s) |" % ", ".join(CHOICE_MEASURES),
              "|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 2)]
-    for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1].get("margin", kv[1]["score"])):
+    for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["margin"]):
         paired = v.get("against_best")
-        label = name + (" (%d draws)" % v["draws"] if v.get("draws", 1) > 1 else "") + (
+        label = name + (" (%d draws)" % v["draws"] if v["draws"] > 1 else "") + (
             " (overruled)" if name in choice.get("overruled", {}) else
             " (fewer wins)" if name in choice.get("fewer_wins", {}) else
             " (too slow for its gain)" if name in choice.get("too_slow", {}) else "")

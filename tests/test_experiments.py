@@ -535,6 +535,11 @@ def test_natural_light_choose_judges_a_setting_with_a_second_draw_on_both_draws(
     assert pooled["draws"] == 2 and pooled["brdf_eq20_paper"]["wins"] == 5
     assert pooled["first_draw"]["brdf_eq20_paper"]["wins"] == 2
     assert choice["settings"]["w_gmm10"]["draws"] == 1
+    # the margin: the score less the reference's on the same draws (pooled, or the first)
+    both = natural_light.setting_scores(os.path.join(first, "defaults"), os.path.join(second, "defaults"))
+    assert pooled["margin"] == pytest.approx(pooled["score"] - both["score"])
+    alone = choice["settings"]["w_gmm10"]
+    assert alone["margin"] == pytest.approx(alone["score"] - choice["settings"]["defaults"]["first_draw"]["score"])
     assert "brdf_eq20_paper wins 2 < 3" in choice["fewer_wins"]["w_gmm10"]
     assert "w_gmm100 (2 draws)" in natural_light.choice_table(choice)
     # a reference without a second draw: every setting on its first draw
