@@ -5,7 +5,10 @@ as in ``natural_light.py``, inferred from the pixels the app uses:
 :func:`~mi_dsbrdf.inference.pixels.usable_pixels`, since the twentieth session;
 the run before, with the silhouette ring, is in
 ``benchmarks/results/truth_posterior_before_interior.json``) two points of the
-negative log posterior (Eq. 18) are compared term by term:
+negative log posterior (Eq. 18) are compared term by term, on the posterior the
+app's colour pass minimises (each texel lit from ``Config.texel_samples``
+squared directions; at texel centres before the twenty-first session, whose run
+is ``benchmarks/results/truth_posterior_centres.json``):
 
 * **recovered**: what :func:`~mi_dsbrdf.inference.envmap.recover_envmap` returns
   under the shipped :class:`~mi_dsbrdf.config.Config`;
@@ -14,6 +17,11 @@ negative log posterior (Eq. 18) are compared term by term:
   it in BRDF space) under the true map, at the level that matches the image,
   refined by an illumination block of ``REFINE_ITERS`` L-BFGS iterations with
   the material held (the best map the posterior allows that material).
+
+A third point (``--descend``, since the twenty-first session; stored as each
+case's ``descent``): from the truth's point, one colour pass of the shipped
+alternation. It says whether a truth with the lower posterior is a basin the
+starts miss (the descent stays near it) or only a point the descent leaves.
 
 If the truth's posterior is lower, the search missed it (more iterations or
 better starts would help). If it is higher, the objective itself prefers the
@@ -24,6 +32,7 @@ image.
 
     .venv/bin/python benchmarks/truth_posterior.py --probes polyhaven/quarry_01_1k.hdr   # 12 cases, ~5 min
     .venv/bin/python benchmarks/truth_posterior.py              # all 36 validation cases, ~15 min on 2 cores
+    .venv/bin/python benchmarks/truth_posterior.py --descend    # the descent from each stored case's truth, ~4 min
     .venv/bin/python benchmarks/truth_posterior.py --report     # -> docs/truth_posterior.md
 
 Validation materials and probes only. Each case is added to
@@ -69,52 +78,95 @@ def validation_case(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), 
     return model, samples, truth, img, ex.texels({"type": "dsbrdf"}, res, (H, W))
 
 
-def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
-    """Recover one case and score both points (see the module doc)."""
-    from mi_dsbrdf.backend import single_blas_thread
-    from mi_dsbrdf.brdf.chromaticity import chroma_logits
+def case_posterior(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> tuple:
+    """One validation case as the points are scored: (the posterior of the colour
+    pass, which the app's answer minimises last: the app's pixels, each texel lit
+    from ``Config.texel_samples`` squared directions; the leave-one-out model, the
+    measured material's samples, the true map at ``map_size``, the seen texels
+    (H, W), the image, the view, the pixels)."""
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.evaluation import experiment as ex
-    from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
-    from mi_dsbrdf.inference import envmap
-    from mi_dsbrdf.inference.forward import apply_transport
     from mi_dsbrdf.inference.objective import Posterior
     from mi_dsbrdf.inference.pixels import usable_pixels
-    from mi_dsbrdf.model.fitting import fit_basis
     model, samples, truth, img, ts = validation_case(material, probe, data, cache, map_size, res)
-    H, W = map_size
-    cfg = Config(map_size=(H, W))
     mask = usable_pixels(ts.mask, img)         # the pixels the app infers from (since the twentieth session)
-    rec = envmap.recover_envmap(ts, img, mask, model, cfg)
-    post = Posterior(ts, img, mask, model, cfg)
-    seen, small = rec.seen, ex.downsample(truth, H, W)
+    cfg = Config(map_size=tuple(map_size))
+    # scored on the colour pass's forward model since the twenty-first session (texel centres before, where
+    # a lobe sharper than the texel spacing is aliased and the descent's end scored above its start)
+    post = Posterior(ts.with_map_size(tuple(map_size), cfg.texel_samples), img, mask, model, cfg)
+    return post, model, samples, ex.downsample(truth, *map_size), ~post.view.unseen.reshape(map_size), img, ts, mask
 
-    def bins_for(log_map):                  # as recover_envmap fixes them: unseen texels at the darkest seen
-        return post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
 
-    def point(psi, logits, log_map, T):
-        total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins_for(log_map))
-        values = post.material(psi, logits).eval(samples.theta_h, samples.theta_d)
-        L = np.where(seen[..., None], np.exp(log_map), 0.0)
-        return dict(neg_log_posterior=total, likelihood=lik, **terms,
-                    brdf_eq20_paper=log_rmse_scale_invariant(values, samples.values, samples.cos_i, "paper")[0],
-                    highlight_ratio=highlight_ratio(values, samples.theta_h, samples.theta_d),
-                    illumination_error=scale_invariant_log_error(L, small, seen))
+def bins_for(post, log_map, seen):
+    """The entropy prior's bins as recover_envmap fixes them: unseen texels at the darkest seen."""
+    return post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
 
-    logits_r = chroma_logits(rec.chromaticity)
-    recovered = point(rec.psi, logits_r, np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK),
-                      post.transport(rec.psi, logits_r))
+
+def score(post, samples, small, seen, psi, logits, log_map, T) -> dict:
+    """The negative log posterior term by term at (psi, logits, log map) whose
+    transport is ``T``, the BRDF's Eq. 20 (paper) and highlight ratio, the map's error."""
+    from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
+    from mi_dsbrdf.inference import envmap
+    total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins_for(post, log_map, seen))
+    values = post.material(psi, logits).eval(samples.theta_h, samples.theta_d)
+    L = np.where(seen[..., None], np.exp(log_map), 0.0)
+    return dict(neg_log_posterior=total, likelihood=lik, **terms,
+                brdf_eq20_paper=log_rmse_scale_invariant(values, samples.values, samples.cos_i, "paper")[0],
+                highlight_ratio=highlight_ratio(values, samples.theta_h, samples.theta_d),
+                illumination_error=scale_invariant_log_error(L, small, seen))
+
+
+def truth_point(post, model, samples, small, seen) -> tuple:
+    """The truth's point: (psi, logits, log map, transport) of the measured material's
+    best basis fit under the true map at the level that matches the image, refined
+    by an illumination block of REFINE_ITERS iterations with the material held."""
+    from mi_dsbrdf.backend import single_blas_thread
+    from mi_dsbrdf.brdf.chromaticity import chroma_logits
+    from mi_dsbrdf.inference import envmap
+    from mi_dsbrdf.inference.forward import apply_transport
+    from mi_dsbrdf.model.fitting import fit_basis
     fit = fit_basis(samples, model.basis).material
-    psi_t, logits_t = fit.psi, chroma_logits(fit.chromaticity)
-    T = post.transport(psi_t, logits_t)                         # the truth's fit: one transport serves all below
+    psi, logits = fit.psi, chroma_logits(fit.chromaticity)
+    T = post.transport(psi, logits)
     level = np.median(post.observed[post.keep] / np.maximum(apply_transport(T, small.reshape(-1, 3))[post.keep],
                                                             1e-300))
     x = np.where(seen[..., None], np.log(np.maximum(small * level, 1e-300)), envmap.BLACK)
-    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, bins_for(x), False, REFINE_ITERS)
-    fitted = point(psi_t, logits_t, x, T)
+    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, bins_for(post, x, seen), False,
+                                                      REFINE_ITERS)
+    return psi, logits, x, T
+
+
+def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
+    """Recover one case and score both points (see the module doc)."""
+    from mi_dsbrdf.brdf.chromaticity import chroma_logits
+    from mi_dsbrdf.inference import envmap
+    from mi_dsbrdf.evaluation.metrics import highlight_ratio
+    post, model, samples, small, seen, img, ts, mask = case_posterior(material, probe, data, cache, map_size, res)
+    rec = envmap.recover_envmap(ts, img, mask, model, post.cfg)
+    seen = rec.seen                         # the recovery's seen texels (those of the view: every pixel is used)
+    logits_r = chroma_logits(rec.chromaticity)
+    recovered = score(post, samples, small, seen, rec.psi, logits_r,
+                      np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK), post.transport(rec.psi, logits_r))
     return {"material": material, "probe": probe, "truth_highlight_ratio":
             highlight_ratio(samples.values, samples.theta_h, samples.theta_d),
-            "recovered": recovered, "truth_fit": fitted}
+            "recovered": recovered, "truth_fit": score(post, samples, small, seen,
+                                                       *truth_point(post, model, samples, small, seen))}
+
+
+def descend(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
+    """Where the search goes from the truth: from the truth's point (truth_point), one
+    colour pass of the shipped alternation (:func:`~mi_dsbrdf.inference.envmap.alternate`,
+    as recover_envmap runs it), its end scored as run scores both points. If it stays near the truth's BRDF at a posterior below
+    the recovered answer's, the truth is a basin the starts miss; if it leaves it,
+    the objective's descent does."""
+    from mi_dsbrdf.backend import single_blas_thread
+    from mi_dsbrdf.inference import envmap
+    post, model, samples, small, seen = case_posterior(material, probe, data, cache, map_size, res)[:5]
+    psi, logits, x, _ = truth_point(post, model, samples, small, seen)
+    rounds = []
+    psi, logits, x, _, _ = single_blas_thread(envmap.alternate)(post, "colour", tuple(map_size), psi, logits, x,
+                                                               post.cfg, rounds.append)
+    return dict(score(post, samples, small, seen, psi, logits, x, post.transport(psi, logits)), rounds=len(rounds))
 
 
 def run_saved(fn, path, pairs, workers, rows):
@@ -160,10 +212,28 @@ def report(rows) -> str:
                % (len(flat), sum(r["truth_fit"]["neg_log_posterior"] < r["recovered"]["neg_log_posterior"]
                                  for r in flat),
                   sum(r["truth_fit"]["likelihood"] < r["recovered"]["likelihood"] for r in flat)), ""]
+    went = [r for r in rows if "descent" in r]
+    if went:
+        def lower(r, a, b):
+            return r[a]["neg_log_posterior"] < r[b]["neg_log_posterior"]
+        md += ["Descent from the truth (`--descend`, %d cases): one colour pass of the shipped alternation from "
+               "the truth's point ends with a posterior below the recovered answer's in %d, below the truth's own "
+               "point in %d; its BRDF (Eq. 20 paper) is below the recovered answer's in %d and within 10 %% of the "
+               "truth fit's in %d. Of the %d cases whose truth point's posterior is below the recovered answer's, "
+               "the descent's BRDF is below the recovered answer's in %d." % (
+                   len(went), sum(lower(r, "descent", "recovered") for r in went),
+                   sum(lower(r, "descent", "truth_fit") for r in went),
+                   sum(r["descent"]["brdf_eq20_paper"] < r["recovered"]["brdf_eq20_paper"] for r in went),
+                   sum(r["descent"]["brdf_eq20_paper"] < 1.1 * r["truth_fit"]["brdf_eq20_paper"] for r in went),
+                   sum(lower(r, "truth_fit", "recovered") for r in went),
+                   sum(lower(r, "truth_fit", "recovered") and r["descent"]["brdf_eq20_paper"]
+                       < r["recovered"]["brdf_eq20_paper"] for r in went)), ""]
     md += ["| material | probe | point | -log posterior | likelihood | gmm | gradient | Eq. 20 paper | highlight "
            "(measured) | map |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        for key in ("recovered", "truth_fit"):
+        for key in ("recovered", "truth_fit", "descent"):
+            if key not in r:
+                continue
             p = r[key]
             md.append("| %s | %s | %s | %.0f | %.0f | %.0f | %.0f | %.3f | %.2f (%.2f) | %.3f |" % (
                 r["material"], os.path.splitext(os.path.basename(r["probe"]))[0], key.replace("_", " "),
@@ -172,12 +242,36 @@ def report(rows) -> str:
     return "\n".join(md) + "\n"
 
 
+def add_descents(args) -> None:
+    """descend() on every stored case of ``args.materials`` x ``args.probes`` that has
+    none yet, in ``args.workers`` processes, each stored as its row's "descent" as it ends."""
+    with open(OUT) as f:
+        rows = json.load(f)
+    todo = [r for r in rows if r["material"] in args.materials and r["probe"] in args.probes and "descent" not in r]
+    with ProcessPoolExecutor(args.workers) as pool:
+        for i, (r, d) in enumerate(zip(todo, pool.map(descend, [r["material"] for r in todo],
+                                                      [r["probe"] for r in todo])), 1):
+            r["descent"] = d
+            tmp = OUT + ".tmp"
+            with open(tmp, "w") as f:
+                json.dump(rows, f, indent=1)
+            os.replace(tmp, OUT)
+            print("[%d/%d] %-24s %-28s -log posterior recovered %8.0f truth fit %8.0f descent %8.0f | Eq. 20 %.3f "
+                  "%.3f %.3f" % (i, len(todo), r["material"], os.path.basename(r["probe"]),
+                                 r["recovered"]["neg_log_posterior"], r["truth_fit"]["neg_log_posterior"],
+                                 d["neg_log_posterior"], r["recovered"]["brdf_eq20_paper"],
+                                 r["truth_fit"]["brdf_eq20_paper"], d["brdf_eq20_paper"]), flush=True)
+    print(report(rows))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--materials", nargs="*", default=VALIDATION_MATERIALS)
     ap.add_argument("--probes", nargs="*", default=VALIDATION_PROBES)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--report", action="store_true", help="write docs/truth_posterior.md from the results")
+    ap.add_argument("--descend", action="store_true",
+                    help="add to each stored case where one colour pass goes from the truth's point (descend)")
     args = ap.parse_args(argv)
     if args.report:
         with open(OUT) as f:
@@ -188,6 +282,8 @@ def main(argv=None):
         return
     if not os.path.exists(os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
+    if args.descend:
+        return add_descents(args)
     rows = []
     for i, n, r in run_saved(run, OUT, [(m, p) for p in args.probes for m in args.materials], args.workers, rows):
         a, b = r["recovered"], r["truth_fit"]

@@ -31,6 +31,21 @@ def data():
     return os.path.dirname(data_path("merl"))
 
 
+def write_case(folder, material, brdf, illumination=1.0, relit=1.0, seconds=1.0, baseline=True, method=None,
+               **fields):
+    """One fabricated natural_light.py case result in ``folder``: ``material`` under
+    p.hdr, its BRDF, map and relit errors (each doing nothing's 1 with ``baseline``,
+    so they read as ratios), run time and any further fields (highlight ratios)."""
+    os.makedirs(folder, exist_ok=True)
+    r = {"case": {"material": material, "probe": "p.hdr", **({"method": method} if method else {})},
+         "seconds": seconds, "brdf_eq20_paper": brdf, "illumination_error": illumination,
+         "relight": {"pisa": relit}, **fields}
+    if baseline:
+        r["baseline"] = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
+    with open(os.path.join(folder, "%s-%s.json" % (method or "dsbrdf", material)), "w") as f:
+        json.dump(r, f)
+
+
 def test_metrics_are_scale_invariant_and_detect_errors():
     rng = np.random.default_rng(0)
     t = rng.random((8, 16, 3)) + 0.1
@@ -322,11 +337,7 @@ def test_paired_against_counts_cases_by_material_and_probe(tmp_path):
     import natural_light
 
     def write(folder, material, brdf, relit, method=None):
-        os.makedirs(tmp_path / folder, exist_ok=True)
-        r = {"case": {"material": material, "probe": "p.hdr", **({"method": method} if method else {})},
-             "brdf_eq20_paper": brdf, "illumination_error": 1.0, "relight": {"pisa": relit}}
-        with open(tmp_path / folder / ("%s-%s.json" % (method or "dsbrdf", material)), "w") as f:
-            json.dump(r, f)
+        write_case(tmp_path / folder, material, brdf, relit=relit, baseline=False, method=method)
     write("a", "m1", 0.5, 0.2)
     write("a", "m1", 9.0, 9.0, method="principled-adam")      # another method: not this tool's case
     write("a", "m2", 2.0, 0.2)
@@ -373,13 +384,8 @@ def test_natural_light_against_table_and_what_the_report_set_refuses(tmp_path):
     import natural_light
 
     def write(folder, material, brdf, highlight, truth_highlight):
-        os.makedirs(tmp_path / folder, exist_ok=True)
-        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
-        r = {"case": {"material": material, "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
-             "brdf_eq20_paper": brdf, "illumination_error": 0.5, "relight": {"pisa": 0.5},
-             "highlight_ratio": highlight, "truth_highlight_ratio": truth_highlight}
-        with open(tmp_path / folder / ("%s.json" % material), "w") as f:
-            json.dump(r, f)
+        write_case(tmp_path / folder, material, brdf, 0.5, 0.5, highlight_ratio=highlight,
+                   truth_highlight_ratio=truth_highlight)
     write("new", "felt", 0.5, 1.1, 1.0)       # near-Lambertian, no highlight
     write("new", "chrome", 2.0, 90.0, 100.0)
     write("ref", "felt", 0.8, 5.0, 1.0)       # near-Lambertian with a highlight
@@ -456,12 +462,7 @@ def test_natural_light_choose_never_picks_an_overruled_setting(tmp_path):
     import natural_light
 
     def write(folder, ratio):
-        os.makedirs(folder, exist_ok=True)
-        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
-        r = {"case": {"material": "felt", "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
-             "brdf_eq20_paper": ratio, "illumination_error": ratio, "relight": {"pisa": ratio}}
-        with open(folder / "felt.json", "w") as f:
-            json.dump(r, f)
+        write_case(folder, "felt", ratio, ratio, ratio)
     assert natural_light.OVERRULED
     for i, bad in enumerate(natural_light.OVERRULED):
         root = tmp_path / str(i)
@@ -483,13 +484,8 @@ def test_natural_light_choose_keeps_the_shipped_code_over_a_setting_with_fewer_w
     import natural_light
 
     def write(folder, case, ratio, highlight=1.0):
-        os.makedirs(tmp_path / folder, exist_ok=True)
-        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
-        r = {"case": {"material": "m%d" % case, "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
-             "brdf_eq20_paper": ratio, "illumination_error": ratio, "relight": {"pisa": ratio},
-             "truth_highlight_ratio": 1.2, "highlight_ratio": highlight}
-        with open(tmp_path / folder / ("m%d.json" % case), "w") as f:
-            json.dump(r, f)
+        write_case(tmp_path / folder, "m%d" % case, ratio, ratio, ratio, truth_highlight_ratio=1.2,
+                   highlight_ratio=highlight)
     for case in range(3):
         write("defaults", case, 0.8)                                  # 3 wins, median 0.8
         write("w_gmm100", case, [0.1, 0.2, 1.5][case])                # median 0.2, but 2 wins
@@ -515,13 +511,8 @@ def test_natural_light_choose_judges_a_setting_with_a_second_draw_on_both_draws(
     import natural_light
 
     def write(root, folder, ratios):
-        os.makedirs(tmp_path / root / folder, exist_ok=True)
-        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
         for case, ratio in enumerate(ratios):
-            r = {"case": {"material": "m%d" % case, "probe": "p.hdr"}, "seconds": 1.0, "baseline": base,
-                 "brdf_eq20_paper": ratio, "illumination_error": 0.8, "relight": {"pisa": 0.8}}
-            with open(tmp_path / root / folder / ("m%d.json" % case), "w") as f:
-                json.dump(r, f)
+            write_case(tmp_path / root / folder, "m%d" % case, ratio, 0.8, 0.8)
     write("first", "defaults", [0.8, 0.8, 0.8])            # 3 BRDF wins in its first draw
     write("second", "defaults", [0.8, 0.8, 1.2])           # a rounding took one: 5 of 6 over both
     write("first", "w_gmm100", [0.5, 0.5, 1.1])            # one short on the first draw alone
@@ -611,12 +602,7 @@ def test_natural_light_choose_bars_a_slow_setting_unless_it_gains_more_than_a_re
     slow, noise = 1.05 * natural_light.TIME_RATIO, natural_light.SCORE_NOISE
 
     def write(folder, ratio, seconds):
-        os.makedirs(folder, exist_ok=True)
-        base = {"brdf_eq20_paper": 1.0, "illumination_error": 1.0, "relight": {"pisa": 1.0}}
-        r = {"case": {"material": "felt", "probe": "p.hdr"}, "seconds": seconds, "baseline": base,
-             "brdf_eq20_paper": ratio, "illumination_error": ratio, "relight": {"pisa": ratio}}
-        with open(folder / "felt.json", "w") as f:
-            json.dump(r, f)
+        write_case(folder, "felt", ratio, ratio, ratio, seconds)
     write(tmp_path / "w_gmm300", 0.5, 10.0)                          # the reference
     write(tmp_path / "start_candidates2", 0.5 - noise / 2, 10.0 * slow)  # slower, gain within the noise
     write(tmp_path / "w_gmm200", 0.5 - noise / 4, 10.0 * 0.95 * natural_light.TIME_RATIO)
