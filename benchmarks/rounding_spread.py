@@ -49,12 +49,12 @@ def run(material, probe) -> dict:
     from mi_dsbrdf.evaluation import experiment as ex
     from mi_dsbrdf.evaluation.metrics import material_errors, scale_invariant_log_error
     from mi_dsbrdf.inference import envmap
-    model, samples, truth, img, ts = validation_case(material, probe)
+    model, samples, truth, img, ts, mask = validation_case(material, probe)   # mask: the app's pixels
     cfg = Config(map_size=(32, 64))
     small = ex.downsample(truth, *cfg.map_size)
     runs = []
     for exposure in EXPOSURES:
-        rec = envmap.recover_envmap(ts, img * exposure, ts.mask, model, cfg)
+        rec = envmap.recover_envmap(ts, img * exposure, mask, model, cfg)
         errors = material_errors(rec.material, samples)
         runs.append(dict(exposure=exposure, psi=rec.psi.tolist(), neg_log_posterior=rec.log[-1]["neg_log_posterior"],
                          brdf_eq20_paper=errors["paper"], brdf_eq20_cosine=errors["cosine"],

@@ -72,12 +72,12 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     from mi_dsbrdf.inference.forward import apply_transport
     from mi_dsbrdf.inference.objective import Posterior
     from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
-    model, samples, truth, img, ts = validation_case(material, probe, data, cache, map_size, res)
+    model, samples, truth, img, ts, mask = validation_case(material, probe, data, cache, map_size, res)
     H, W = map_size
     cfg = Config(map_size=(H, W))
-    rec = envmap.recover_envmap(ts, img, ts.mask, model, cfg)
+    rec = envmap.recover_envmap(ts, img, mask, model, cfg)
     # the colour pass's posterior (its texel sampling and pixels), as recover_envmap builds it
-    post = Posterior(ts.with_map_size((H, W), cfg.texel_samples), img, ts.mask, model, cfg,
+    post = Posterior(ts.with_map_size((H, W), cfg.texel_samples), img, mask, model, cfg,
                      max_pixels=cfg.map_pairs // (H * W))
     seen, small = rec.seen, ex.downsample(truth, H, W)
     brightness = post.observed.mean(axis=1)
