@@ -326,7 +326,17 @@ def test_truth_posterior_report_counts_where_the_objective_prefers_the_recovered
     assert "lower than the recovered answer's in 1 (the search missed it) and higher in 1" in md
     assert "its likelihood alone is lower in 1 of 2" in md
     assert "Near-Lambertian materials (1 cases): the truth's posterior lower in 0, its likelihood lower in 1" in md
-    assert md.count("| quarry |") == 4
+    assert md.count("| quarry |") == 4 and "Descent from the truth" not in md
+    # the descents (--descend): a basin the search missed is one whose descent ends below the recovered answer
+    rows[0].update(descent=point(150, 45, 0.3), descent_constant_map=point(160, 45, 0.5))
+    rows[1].update(descent=point(240, 80, 0.35), descent_constant_map=point(245, 85, 0.4))   # within 5 %
+    md = truth_posterior.report(rows)
+    assert ("ends with a posterior below the recovered answer's in 1, below the truth's own point in 2; its BRDF "
+            "(Eq. 20 paper) is below the recovered answer's in 2 and within 10 % of the truth fit's in 0") in md
+    assert "Of the 1 cases whose descent ends below the recovered answer's posterior" in md
+    assert ("ends below the recovered answer's posterior in 1, with the better BRDF in 1; of the 1 basins the "
+            "search missed, it reaches a posterior within 5 % of the descent's in 1") in md
+    assert md.count("| quarry |") == 8
 
 
 def test_paired_against_counts_cases_by_material_and_probe(tmp_path):
