@@ -34,7 +34,7 @@ image.
 
     .venv/bin/python benchmarks/truth_posterior.py --probes polyhaven/quarry_01_1k.hdr   # 12 cases, ~5 min
     .venv/bin/python benchmarks/truth_posterior.py              # all 36 validation cases, ~15 min on 2 cores
-    .venv/bin/python benchmarks/truth_posterior.py --descend    # the descent from each stored case's truth, ~4 min
+    .venv/bin/python benchmarks/truth_posterior.py --descend    # both descents from each stored case's truth, ~8 min
     .venv/bin/python benchmarks/truth_posterior.py --report     # -> docs/truth_posterior.md
 
 Validation materials and probes only. Each case is added to

@@ -29,6 +29,10 @@ class Config:
 
     map_size : (H, W) texels of the lat-long illumination map (H >= 2, W >= 4)
     max_rounds : rounds of the two blocks per pass (>= 1)
+    grey_rounds : rounds of the grey pass of an illumination map's inference, None
+        for ``max_rounds``; 0 leaves the grey pass out (the colour pass runs from
+        the start's choice; a grey image, whose only pass it is, runs it for
+        ``max_rounds``)
     tol : relative change of the negative log posterior that ends a pass
     block_iters : Levenberg-Marquardt iterations per reflectance block
     illumination_iters : L-BFGS iterations per illumination block (each one
@@ -147,6 +151,7 @@ class Config:
     """
     map_size: tuple = (32, 64)
     max_rounds: int = 3
+    grey_rounds: int | None = None
     tol: float = 1e-3
     block_iters: int = 15
     illumination_iters: int = 60
@@ -189,6 +194,9 @@ class Config:
         g = self.grey_texel_samples
         if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 1):
             raise ConfigError("grey_texel_samples must be None or an integer >= 1, got %r" % (g,))
+        g = self.grey_rounds
+        if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 0):
+            raise ConfigError("grey_rounds must be None or an integer >= 0, got %r" % (g,))
         a = self.gradient_alpha
         if not (isinstance(a, (int, float)) and not isinstance(a, bool) and 0 < a < 1):
             raise ConfigError("gradient_alpha must be a number between 0 and 1 (exclusive), got %r" % (a,))

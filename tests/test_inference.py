@@ -218,6 +218,35 @@ def test_grey_texel_samples_runs_the_start_and_grey_pass_at_texel_centres():
 
 
 
+def test_grey_rounds_sets_the_grey_pass_s_budget_and_zero_leaves_it_out():
+    """``Config.grey_rounds``: 1 runs one grey round before the colour pass's; 0 runs
+    the colour pass straight from the start's choice (the start's rows unchanged);
+    a grey image, whose only pass is the grey one, runs it for ``max_rounds``."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    base = Config(map_size=(8, 16), max_rounds=2, tol=1e-12, block_iters=3, illumination_iters=10,
+                  texel_samples=1)
+    start = [np.zeros(model.basis.n_bases)]
+    runs = {g: recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, dataclasses.replace(base, grey_rounds=g),
+                              starts=start) for g in (None, 1, 0)}
+    passes = {g: [r["pass"] for r in res.log] for g, res in runs.items()}
+    assert passes[None] == ["start", "grey", "grey", "colour", "colour"]
+    assert passes[1] == ["start", "grey", "colour", "colour"]
+    assert passes[0] == ["start", "colour", "colour"]
+    assert runs[0].log[0]["neg_log_posterior"] == runs[None].log[0]["neg_log_posterior"]
+    final = {g: res.log[-1]["neg_log_posterior"] for g, res in runs.items()}
+    assert np.isfinite(final[0]) and final[0] != final[None] and np.all(np.isfinite(runs[0].psi))
+    grey = recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, dataclasses.replace(base, grey_rounds=0),
+                          colour=False, starts=start)
+    assert [r["pass"] for r in grey.log] == ["start", "grey", "grey"]
+    with pytest.raises(ConfigError, match="grey_rounds"):
+        Config(grey_rounds=-1)
+
+
 def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     """``Config.start_candidates`` 2: the two best starts by their posterior each
     run the grey pass (rows tagged with the candidate); the first candidate's

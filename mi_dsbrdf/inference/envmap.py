@@ -97,7 +97,8 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # and the map is scaled back at the end
     exposure = image_level(observed, mask)
     observed = np.asarray(observed, dtype=np.float64) / exposure
-    passes = ["grey", "colour"] if colour else ["grey"]
+    # Config.grey_rounds 0 leaves the grey pass out of a colour image's inference
+    passes = (["grey"] if not colour or cfg.grey_rounds != 0 else []) + (["colour"] if colour else [])
     sizes = map_sizes(cfg.map_size, cfg.map_levels, len(passes))
     posteriors = {}
 
@@ -185,9 +186,9 @@ def image_level(observed, mask) -> float:
 
 def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=None) -> tuple:
     """One pass of alternating illumination and reflectance blocks (at most
-    ``cfg.max_rounds`` rounds, until the posterior changes by less than
-    ``cfg.tol``) on a map of ``size`` from the given state (the map resampled to
-    it). Logs one row per round (``candidate``: which of the start's candidates
+    ``cfg.max_rounds`` rounds, ``cfg.grey_rounds`` in the grey pass if set, until
+    the posterior changes by less than ``cfg.tol``) on a map of ``size`` from the
+    given state (the map resampled to it). Logs one row per round (``candidate``: which of the start's candidates
     the pass runs from, if several). Returns (psi, logits, log map, seen (H, W),
     negative log posterior)."""
     H, W = size
@@ -196,7 +197,9 @@ def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=N
     seen = ~post.view.unseen.reshape(H, W)
     extra = {} if candidate is None else {"candidate": candidate}
     prev = kept = None
-    for rnd in range(cfg.max_rounds):
+    # the grey pass's own budget (0 or None: max_rounds; it runs under 0 only when the image is grey)
+    rounds = cfg.grey_rounds if pass_name == "grey" and cfg.grey_rounds else cfg.max_rounds
+    for rnd in range(rounds):
         # illumination block (T from the current reflectance)
         bins = post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
         log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
