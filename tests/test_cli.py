@@ -64,7 +64,7 @@ def test_the_colour_split_is_on_by_default_and_an_option_of_recover(capsys):
     import pytest
     from mi_dsbrdf.app.cli import _config
     args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
-                start_candidates=None)
+                start_candidates=None, grey_rounds=None)
     on = _config(argparse.Namespace(no_colour_split=False, **args))
     off = _config(argparse.Namespace(no_colour_split=True, **args))
     assert (on.w_chromaticity, on.w_light_colour) == (1.0 / 3.0, 1.0) and on.colour_split
@@ -79,11 +79,26 @@ def test_start_candidates_is_an_option_of_recover(tmp_path, capsys):
     from mi_dsbrdf.app.cli import _config
     args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
                 no_colour_split=False)
-    assert _config(argparse.Namespace(start_candidates=None, **args)).start_candidates == 1
-    assert _config(argparse.Namespace(start_candidates=2, **args)).start_candidates == 2
+    assert _config(argparse.Namespace(start_candidates=None, grey_rounds=None, **args)).start_candidates == 1
+    assert _config(argparse.Namespace(start_candidates=2, grey_rounds=None, **args)).start_candidates == 2
     code = main(["recover", "--sphere", "--light", "envmap", "--image", str(tmp_path / "i.exr"),
                  "--out", str(tmp_path / "o"), "--start-candidates", "0"])
     assert code != 0 and "start_candidates" in capsys.readouterr().err
+
+
+def test_grey_rounds_is_an_option_of_recover(tmp_path, capsys):
+    """--grey-rounds N sets Config.grey_rounds (default None: the passes' rounds);
+    a negative N is a one-line error naming the setting."""
+    import argparse
+    from mi_dsbrdf.app.cli import _config
+    args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
+                no_colour_split=False, start_candidates=None)
+    assert _config(argparse.Namespace(grey_rounds=None, **args)).grey_rounds is None
+    assert _config(argparse.Namespace(grey_rounds=0, **args)).grey_rounds == 0
+    code = main(["recover", "--sphere", "--light", "envmap", "--image", str(tmp_path / "i.exr"),
+                 "--out", str(tmp_path / "o"), "--grey-rounds", "-1"])
+    err = capsys.readouterr().err
+    assert code != 0 and "grey_rounds" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
 def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys):

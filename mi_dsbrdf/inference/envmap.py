@@ -32,8 +32,8 @@ channels: the grey-world assumption; the lobes keep the image's colour), then
 colour from that start (chromaticities and map colour free), unless the
 image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides).
 ``Config.grey_rounds`` sets the grey pass's rounds; 0 leaves it out of a
-colour image's inference (an option: faster, one validation map win fewer). The start runs
-on the map at half its resolution (:func:`map_sizes`,
+colour image's inference (an option: faster, one validation map win fewer).
+The start runs on the map at half its resolution (:func:`map_sizes`,
 ``Config.map_levels``); its map moves up by :func:`resample`.
 
 Colour split (not in the paper): one image shows only the product of the
@@ -190,8 +190,9 @@ def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=N
     """One pass of alternating illumination and reflectance blocks (at most
     ``cfg.max_rounds`` rounds, ``cfg.grey_rounds`` in the grey pass if set, until
     the posterior changes by less than ``cfg.tol``) on a map of ``size`` from the
-    given state (the map resampled to it). Logs one row per round (``candidate``: which of the start's candidates
-    the pass runs from, if several). Returns (psi, logits, log map, seen (H, W),
+    given state (the map resampled to it). Logs one row per round
+    (``candidate``: which of the start's candidates the pass runs from, if
+    several). Returns (psi, logits, log map, seen (H, W),
     negative log posterior)."""
     H, W = size
     log_map = resample(log_map, size)
