@@ -169,10 +169,8 @@ def descend(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) 
     from mi_dsbrdf.inference import envmap
     post, model, samples, small, seen = case_posterior(material, probe, data, cache, map_size, res)[:5]
     psi, logits, x, T = truth_point(post, model, samples, small, seen)
-    level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
     out = {}
-    for name, log_map in (("descent", x), ("descent_constant_map",
-                                           np.where(seen[..., None], np.log(level), envmap.BLACK) * np.ones(3))):
+    for name, log_map in (("descent", x), ("descent_constant_map", envmap.constant_log_map(post, T, map_size))):
         rounds = []
         p, z, m, _, _ = single_blas_thread(envmap.alternate)(post, "colour", tuple(map_size), psi, logits, log_map,
                                                              post.cfg, rounds.append)
@@ -195,11 +193,16 @@ def run_saved(fn, path, pairs, workers, rows):
     with ProcessPoolExecutor(workers) as pool:
         for i, r in enumerate(pool.map(fn, *zip(*jobs)), 1):
             rows.append(r)
-            tmp = path + ".tmp"
-            with open(tmp, "w") as f:
-                json.dump(rows, f, indent=1)
-            os.replace(tmp, path)
+            save_rows(rows, path)
             yield i, len(jobs), r
+
+
+def save_rows(rows, path) -> None:
+    """Rewrite the JSON list at ``path`` whole, atomically (a cut-off run keeps the file before)."""
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(rows, f, indent=1)
+    os.replace(tmp, path)
 
 
 def report(rows) -> str:
@@ -280,10 +283,7 @@ def add_descents(args) -> None:
         for i, (r, d) in enumerate(zip(todo, pool.map(descend, [r["material"] for r in todo],
                                                       [r["probe"] for r in todo])), 1):
             r.update(d)
-            tmp = OUT + ".tmp"
-            with open(tmp, "w") as f:
-                json.dump(rows, f, indent=1)
-            os.replace(tmp, OUT)
+            save_rows(rows, OUT)
             print("[%d/%d] %-24s %-28s -log posterior recovered %8.0f truth fit %8.0f descent %8.0f | Eq. 20 %.3f "
                   "%.3f %.3f | from a constant map %8.0f %.3f" % (
                                      i, len(todo), r["material"], os.path.basename(r["probe"]),

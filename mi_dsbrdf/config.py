@@ -193,12 +193,10 @@ class Config:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
-        g = self.grey_texel_samples
-        if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 1):
-            raise ConfigError("grey_texel_samples must be None or an integer >= 1, got %r" % (g,))
-        g = self.grey_rounds
-        if g is not None and (not isinstance(g, int) or isinstance(g, bool) or g < 0):
-            raise ConfigError("grey_rounds must be None or an integer >= 0, got %r" % (g,))
+        for name, low in (("grey_texel_samples", 1), ("grey_rounds", 0)):
+            value = getattr(self, name)
+            if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < low):
+                raise ConfigError("%s must be None or an integer >= %d, got %r" % (name, low, value))
         a = self.gradient_alpha
         if not (isinstance(a, (int, float)) and not isinstance(a, bool) and 0 < a < 1):
             raise ConfigError("gradient_alpha must be a number between 0 and 1 (exclusive), got %r" % (a,))

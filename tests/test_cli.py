@@ -54,19 +54,25 @@ def test_render_missing_scene_is_a_clear_error(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def recover_args(**given):
+    """The parsed arguments of ``recover`` that cli._config reads: the benchmarked
+    preset, no override, the colour split on; ``given`` replaces any of them."""
+    import argparse
+    args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
+                start_candidates=None, grey_rounds=None, no_colour_split=False)
+    return argparse.Namespace(**dict(args, **given))
+
+
 def test_bad_map_size_is_a_usage_error(tmp_path, capsys):
     import pytest
     with pytest.raises(SystemExit):
         main(["recover", "--scene", "s.xml", "--image", "i.exr", "--out", str(tmp_path / "o"), "--map-size", "16by32"])
     assert "HxW" in capsys.readouterr().err
 def test_the_colour_split_is_on_by_default_and_an_option_of_recover(capsys):
-    import argparse
     import pytest
     from mi_dsbrdf.app.cli import _config
-    args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
-                start_candidates=None, grey_rounds=None)
-    on = _config(argparse.Namespace(no_colour_split=False, **args))
-    off = _config(argparse.Namespace(no_colour_split=True, **args))
+    on = _config(recover_args(no_colour_split=False))
+    off = _config(recover_args(no_colour_split=True))
     assert (on.w_chromaticity, on.w_light_colour) == (1.0 / 3.0, 1.0) and on.colour_split
     assert (off.w_chromaticity, off.w_light_colour) == (0, 0) and not off.colour_split
     with pytest.raises(SystemExit):
@@ -75,12 +81,9 @@ def test_the_colour_split_is_on_by_default_and_an_option_of_recover(capsys):
 
 
 def test_start_candidates_is_an_option_of_recover(tmp_path, capsys):
-    import argparse
     from mi_dsbrdf.app.cli import _config
-    args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
-                no_colour_split=False)
-    assert _config(argparse.Namespace(start_candidates=None, grey_rounds=None, **args)).start_candidates == 1
-    assert _config(argparse.Namespace(start_candidates=2, grey_rounds=None, **args)).start_candidates == 2
+    assert _config(recover_args()).start_candidates == 1
+    assert _config(recover_args(start_candidates=2)).start_candidates == 2
     code = main(["recover", "--sphere", "--light", "envmap", "--image", str(tmp_path / "i.exr"),
                  "--out", str(tmp_path / "o"), "--start-candidates", "0"])
     assert code != 0 and "start_candidates" in capsys.readouterr().err
@@ -89,12 +92,9 @@ def test_start_candidates_is_an_option_of_recover(tmp_path, capsys):
 def test_grey_rounds_is_an_option_of_recover(tmp_path, capsys):
     """--grey-rounds N sets Config.grey_rounds (default None: the passes' rounds);
     a negative N is a one-line error naming the setting."""
-    import argparse
     from mi_dsbrdf.app.cli import _config
-    args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
-                no_colour_split=False, start_candidates=None)
-    assert _config(argparse.Namespace(grey_rounds=None, **args)).grey_rounds is None
-    assert _config(argparse.Namespace(grey_rounds=0, **args)).grey_rounds == 0
+    assert _config(recover_args()).grey_rounds is None
+    assert _config(recover_args(grey_rounds=0)).grey_rounds == 0
     code = main(["recover", "--sphere", "--light", "envmap", "--image", str(tmp_path / "i.exr"),
                  "--out", str(tmp_path / "o"), "--grey-rounds", "-1"])
     err = capsys.readouterr().err

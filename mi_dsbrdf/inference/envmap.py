@@ -148,8 +148,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     for p0 in psi_starts(model, starts):
         T = post.transport(p0, logits0)
         seen = ~post.view.unseen.reshape(H, W)
-        level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
-        x = np.full((H, W, 3), np.log(max(level, 1e-12)))
+        x = constant_log_map(post, T, (H, W))
         bins = post.entropy.bins_for(x)
         x = illumination_block(post, x, T, seen, bins, True, start_iters(cfg.illumination_iters))
         L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
@@ -174,6 +173,13 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
                     seen=seen, log=rows)
+
+
+def constant_log_map(post, T, size) -> np.ndarray:
+    """Where every start begins: the constant log map (H, W, 3) of ``size`` whose
+    image through the transport ``T`` matches the usable pixels' median level."""
+    level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
+    return np.full(tuple(size) + (3,), np.log(max(level, 1e-12)))
 
 
 def image_level(observed, mask) -> float:
