@@ -120,6 +120,22 @@ class Config:
         lower and 12 higher), at 1.25-1.49x the time side by side: 1 stays the
         default (the rule's time guard bars it; README, Natural light,
         "Options that are not the default")
+    start_on_colour_posterior : judge the starts on the colour pass's posterior
+        (the full map, each texel lit from ``texel_samples`` squared
+        directions; an illumination block with each start's material held, no
+        reflectance block) instead of on the coarse map at texel centres (an
+        illumination block and a reflectance block). Only where there is a
+        colour pass. For glossy materials the coarse start chose basins the
+        colour pass ends far above (twenty-second session,
+        docs/natural_light_history.md)
+    second_route_highlight : None, or a highlight ratio (peak over off-peak of
+        the recovered material, :meth:`~mi_dsbrdf.brdf.dsbrdf.Material.highlight_ratio`)
+        above which a colour image's answer is checked against a second
+        inference, which judges the starts on the colour pass's posterior
+        (``start_on_colour_posterior``) and has no grey pass; the lower
+        posterior of the two is the answer. A lobe sharper than the texel
+        spacing is what the coarse start at texel centres misjudges; a diffuse
+        answer does not pay for the second route
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,
@@ -173,6 +189,8 @@ class Config:
     light_gmm_volume: float = 1.0
     map_levels: int = 2
     start_candidates: int = 1
+    start_on_colour_posterior: bool = False
+    second_route_highlight: float | None = None
     texel_samples: int = 2
     grey_texel_samples: int | None = 1
     reflectance_pairs: int = 500_000
@@ -197,6 +215,14 @@ class Config:
             value = getattr(self, name)
             if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < low):
                 raise ConfigError("%s must be None or an integer >= %d, got %r" % (name, low, value))
+        if self.start_on_colour_posterior not in (True, False):   # 0 and 1 too (benchmarks' settings)
+            raise ConfigError("start_on_colour_posterior must be true or false, got %r"
+                              % (self.start_on_colour_posterior,))
+        object.__setattr__(self, "start_on_colour_posterior", bool(self.start_on_colour_posterior))
+        h = self.second_route_highlight
+        if h is not None and not (isinstance(h, (int, float)) and not isinstance(h, bool) and math.isfinite(h)
+                                  and h > 0):
+            raise ConfigError("second_route_highlight must be None or a finite number > 0, got %r" % (h,))
         a = self.gradient_alpha
         if not (isinstance(a, (int, float)) and not isinstance(a, bool) and 0 < a < 1):
             raise ConfigError("gradient_alpha must be a number between 0 and 1 (exclusive), got %r" % (a,))

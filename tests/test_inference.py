@@ -247,6 +247,68 @@ def test_grey_rounds_sets_the_grey_pass_s_budget_and_zero_leaves_it_out():
         Config(grey_rounds=-1)
 
 
+def test_start_on_colour_posterior_judges_the_starts_on_the_colour_pass_s_posterior():
+    """``Config.start_on_colour_posterior``: the starts are scored on the full map
+    by the posterior the colour pass minimises, so that pass (straight after the
+    start with ``grey_rounds`` 0) never ends a round above the chosen start's value
+    (on the coarse map they are scored on another posterior); a grey image, which
+    has no colour pass, keeps the coarse start, number for number."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    img = img.reshape(RES, RES, 3)
+    base = Config(map_size=(8, 16), max_rounds=1, grey_rounds=0, block_iters=3, illumination_iters=10)
+    on = dataclasses.replace(base, start_on_colour_posterior=True)
+    coarse, full = (recover_envmap(ts, img, ts.mask, model, cfg) for cfg in (base, on))
+    start = [r for r in full.log if r["pass"] == "start"]
+    assert {tuple(r["map_size"]) for r in start} == {(8, 16)}
+    assert {tuple(r["map_size"]) for r in coarse.log if r["pass"] == "start"} == {(4, 8)}
+    colour = [r["neg_log_posterior"] for r in full.log if r["pass"] == "colour"]
+    assert len(start) >= 2 and colour and colour[0] <= min(r["neg_log_posterior"] for r in start)
+    grey = [recover_envmap(ts, img, ts.mask, model, cfg, colour=False).log for cfg in (base, on)]
+    assert [r["neg_log_posterior"] for r in grey[0]] == [r["neg_log_posterior"] for r in grey[1]]
+    assert Config(start_on_colour_posterior=1).start_on_colour_posterior is True
+    with pytest.raises(ConfigError, match="start_on_colour_posterior"):
+        Config(start_on_colour_posterior="yes")
+
+
+def test_second_route_runs_only_above_its_highlight_and_the_lower_posterior_wins():
+    """``Config.second_route_highlight``: above it (here any answer) a second
+    inference (rows tagged ``route`` 1: its starts on the full map, no grey pass)
+    runs after the first, and the answer is the end of the one whose last colour
+    round is lower; far above any answer it never runs, and the run is the
+    default's, number for number."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    model = model_data.shipped_model()
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    img = img.reshape(RES, RES, 3)
+    base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10)
+    default, never, always = (recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, second_route_highlight=h))
+                              for h in (None, 1e9, 1e-9))
+    assert [r["neg_log_posterior"] for r in never.log] == [r["neg_log_posterior"] for r in default.log]
+    np.testing.assert_array_equal(never.psi, default.psi)
+    first = [r for r in always.log if "route" not in r]
+    second = [r for r in always.log if r.get("route") == 1]
+    assert [r["neg_log_posterior"] for r in first] == [r["neg_log_posterior"] for r in default.log]
+    assert [r["pass"] for r in second] == ["start"] * len(reflectance_starts(model)) + ["colour"]
+    assert {tuple(r["map_size"]) for r in second} == {(8, 16)}
+    ends = [first[-1]["neg_log_posterior"], second[-1]["neg_log_posterior"]]
+    winner = default if ends[0] <= ends[1] else None
+    if winner is not None:
+        np.testing.assert_array_equal(always.psi, default.psi)
+    else:
+        assert not np.array_equal(always.psi, default.psi)
+    assert default.material.highlight_ratio() > 0
+    with pytest.raises(ConfigError, match="second_route_highlight"):
+        Config(second_route_highlight=0)
+
+
 def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     """``Config.start_candidates`` 2: the two best starts by their posterior each
     run the grey pass (rows tagged with the candidate); the first candidate's

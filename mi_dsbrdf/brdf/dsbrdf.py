@@ -110,6 +110,21 @@ def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAU
     return rgb
 
 
+def highlight_ratio(values, theta_h, theta_d) -> float:
+    """How much of a highlight a BRDF has: the median over samples near the
+    half-vector peak (theta_h < 5 deg) over the median at theta_h 40-50 deg,
+    both at theta_d < 30 deg, mean over channels. About 1 for a Lambertian
+    surface; a glossy one is far above. ``values`` (N, 3) in 1/sr at the angles
+    ``theta_h``, ``theta_d`` (N,) (radians), e.g. MERL samples."""
+    v = np.asarray(values, dtype=np.float64)
+    th, td = np.asarray(theta_h), np.asarray(theta_d)
+    near = (th < math.radians(5)) & (td < math.radians(30))
+    off = (th > math.radians(40)) & (th < math.radians(50)) & (td < math.radians(30))
+    if not near.any() or not off.any():
+        raise ValueError("the samples hold no angles near theta_h = 0 or 45 deg at theta_d < 30 deg")
+    return float(np.mean(np.median(v[near], axis=0) / np.maximum(np.median(v[off], axis=0), 1e-300)))
+
+
 class Material:
     """A DSBRDF material: R lobes of log-spline kappa/gamma curves + chromaticity.
 
@@ -190,6 +205,13 @@ class Material:
             raise ValueError("theta_h and theta_d must have the same length, got %d and %d" % (th.size, td.size))
         log_cos = log_cos_h(np.cos(th), np.sin(th) ** 2)
         return np.stack(lobe_rgb(log_cos, td, self.log_kappa, self.log_gamma, self.chromaticity, self.knots), -1)
+
+    def highlight_ratio(self) -> float:
+        """:func:`highlight_ratio` of this material on the MERL grid's (theta_h,
+        theta_d) cells (the curves do not depend on phi_d)."""
+        from mi_dsbrdf.brdf.measured import grid_angles
+        th, td = np.meshgrid(*grid_angles()[:2], indexing="ij")
+        return highlight_ratio(self.eval(th.ravel(), td.ravel()), th.ravel(), td.ravel())
 
     # --- files ---------------------------------------------------------------
     def to_dict(self) -> dict:

@@ -36,6 +36,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from mi_dsbrdf.brdf.angles import from_half_diff
+from mi_dsbrdf.brdf.dsbrdf import highlight_ratio  # noqa: F401 (one of this module's measures)
 
 #: Floor of the paper convention's log, log(f + PAPER_FLOOR) (1/sr).
 PAPER_FLOOR = 1e-6
@@ -122,21 +123,6 @@ def material_errors(material, samples, scale_invariant=True, conventions=CONVENT
     if scale_invariant:
         return {c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0] for c in conventions}
     return {c: log_rmse(values, samples.values, samples.cos_i, c) for c in conventions}
-
-
-def highlight_ratio(values, theta_h, theta_d) -> float:
-    """How much of a highlight a BRDF has: the median over samples near the
-    half-vector peak (theta_h < 5 deg) over the median at theta_h 40-50 deg,
-    both at theta_d < 30 deg, mean over channels. About 1 for a Lambertian
-    surface; a glossy one is far above. ``values`` (N, 3) in 1/sr at the angles
-    ``theta_h``, ``theta_d`` (N,) (radians), e.g. MERL samples."""
-    v = np.asarray(values, dtype=np.float64)
-    th, td = np.asarray(theta_h), np.asarray(theta_d)
-    near = (th < math.radians(5)) & (td < math.radians(30))
-    off = (th > math.radians(40)) & (th < math.radians(50)) & (td < math.radians(30))
-    if not near.any() or not off.any():
-        raise ValueError("the samples hold no angles near theta_h = 0 or 45 deg at theta_d < 30 deg")
-    return float(np.mean(np.median(v[near], axis=0) / np.maximum(np.median(v[off], axis=0), 1e-300)))
 
 
 def direction_error_deg(a, b) -> float:

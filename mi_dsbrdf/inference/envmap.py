@@ -99,9 +99,6 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # and the map is scaled back at the end
     exposure = image_level(observed, mask)
     observed = np.asarray(observed, dtype=np.float64) / exposure
-    # Config.grey_rounds 0 leaves the grey pass out of a colour image's inference
-    passes = (["grey"] if not colour or cfg.grey_rounds != 0 else []) + (["colour"] if colour else [])
-    sizes = map_sizes(cfg.map_size, cfg.map_levels, len(passes))
     posteriors = {}
 
     # every map size works on the same pixels, the full map's budget (Config.map_pairs):
@@ -124,8 +121,6 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                                         max_pixels=max_pixels)
         return posteriors[key]
 
-    post = posterior(sizes[0], "start")
-    logits0 = image_chroma_logits(post.observed, post.keep, post.R)
     rows = []
     t0 = time.perf_counter()
 
@@ -134,6 +129,42 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         if progress:
             progress(rows[-1])
 
+    # Config.grey_rounds 0 leaves the grey pass out of a colour image's inference
+    end = route(posterior, model, starts, cfg, log, colour, cfg.start_on_colour_posterior and colour,
+                not colour or cfg.grey_rounds != 0)
+    # the second route (Config.second_route_highlight): an answer with a highlight is
+    # checked against the inference that judges the starts on the colour pass's
+    # posterior and has no grey pass; the lower posterior of the two (the same
+    # posterior: both end in the colour pass) is the answer
+    second = (colour and cfg.second_route_highlight is not None
+              and not (cfg.start_on_colour_posterior and cfg.grey_rounds == 0))
+    if second and Material.from_basis(model.basis, end[0], softmax_chroma(end[1])).highlight_ratio() \
+            > cfg.second_route_highlight:
+        other = route(posterior, model, starts, cfg, lambda row: log(dict(row, route=1)), True, True, False)
+        end = min(end, other, key=lambda e: e[4])
+    psi, logits, log_map, seen, _ = end
+    chroma = softmax_chroma(logits)
+    return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
+                    chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
+                    seen=seen, log=rows)
+
+
+def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> tuple:
+    """One inference from the starts to the last pass's end: the start stage (on the
+    coarse map, or with ``on_colour`` on the colour pass's posterior), the grey pass
+    (if ``grey_pass``), the colour pass (if ``colour``). ``posterior(size,
+    pass_name)`` gives each stage's :class:`~mi_dsbrdf.inference.objective.Posterior`.
+    Returns the last pass's (psi, logits, log map, seen (H, W), negative log
+    posterior)."""
+    passes = (["grey"] if grey_pass else []) + (["colour"] if colour else [])
+    sizes = map_sizes(cfg.map_size, cfg.map_levels, len(passes))
+    # on_colour (Config.start_on_colour_posterior): the starts are judged on the
+    # colour pass's posterior (the full map, each texel lit from texel_samples^2
+    # directions), by an illumination block with the material held; else on the
+    # coarse map at texel centres, by an illumination block and a reflectance block
+    post = posterior(sizes[-1], "colour") if on_colour else posterior(sizes[0], "start")
+    start_size = sizes[-1] if on_colour else sizes[0]
+    logits0 = image_chroma_logits(post.observed, post.keep, post.R)
     # the start and the grey pass keep every lobe at the image's colour: under a grey
     # map, free chromaticities explained the light's colour, which varies over the
     # sphere, by saturated lobes (nickel under the warm wells probe: a lobe of
@@ -144,20 +175,25 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # one reflectance block; the best Config.start_candidates of them by posterior
     # each run the grey pass, and the lowest posterior at its end continues
     found = []
-    H, W = sizes[0]
-    for p0 in psi_starts(model, starts):
+    H, W = start_size
+    for i, p0 in enumerate(psi_starts(model, starts)):
         T = post.transport(p0, logits0)
         seen = ~post.view.unseen.reshape(H, W)
         x = constant_log_map(post, T, (H, W))
         bins = post.entropy.bins_for(x)
         x = illumination_block(post, x, T, seen, bins, True, start_iters(cfg.illumination_iters))
-        L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
-        step = reflectance_block(post, p0, logits0, L, start_iters(cfg.block_iters), fit_scale=True,
-                                 fit_chroma=False)
-        value = post.reflectance_terms(step.psi, step.logits, step.L)[0]
-        log({"pass": "start", "round": len(rows), "neg_log_posterior": value, "map_size": list(sizes[0])})
-        scale = float(np.log(step.L.max() / L.max()))
-        found.append((value, step.psi, step.logits, np.where(seen[..., None], x + scale, BLACK)))
+        if on_colour:
+            value = posterior_at(post, p0, logits0, x, T, seen, post.entropy.bins_for(
+                np.where(seen[..., None], x, x[seen].min())))[0]
+            psi, logits, scale = p0, logits0, 0.0
+        else:
+            L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
+            step = reflectance_block(post, p0, logits0, L, start_iters(cfg.block_iters), fit_scale=True,
+                                     fit_chroma=False)
+            value = post.reflectance_terms(step.psi, step.logits, step.L)[0]
+            psi, logits, scale = step.psi, step.logits, float(np.log(step.L.max() / L.max()))
+        log({"pass": "start", "round": i, "neg_log_posterior": value, "map_size": [H, W]})
+        found.append((value, psi, logits, np.where(seen[..., None], x + scale, BLACK)))
     # sorted is stable: equal posteriors keep the starts' order
     candidates = sorted(found, key=lambda f: f[0])[:cfg.start_candidates]
     # the grey pass from each candidate (one candidate: the start's choice stands)
@@ -165,14 +201,10 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     ends = [alternate(first, passes[0], sizes[1], psi, logits, log_map, cfg, log,
                       candidate=i if len(candidates) > 1 else None)
             for i, (_, psi, logits, log_map) in enumerate(candidates)]
-    psi, logits, log_map, seen, _ = min(ends, key=lambda e: e[4])
+    end = min(ends, key=lambda e: e[4])
     for pass_name, size in zip(passes[1:], sizes[2:]):
-        psi, logits, log_map, seen, _ = alternate(posterior(size, pass_name), pass_name, size, psi, logits,
-                                                  log_map, cfg, log)
-    chroma = softmax_chroma(logits)
-    return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
-                    chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
-                    seen=seen, log=rows)
+        end = alternate(posterior(size, pass_name), pass_name, size, *end[:3], cfg, log)
+    return end
 
 
 def constant_log_map(post, T, size) -> np.ndarray:
