@@ -253,7 +253,8 @@ CHOICE = os.path.join(OUT, "validation_choice.json")
 #: before, which kept the ring
 PIXELS = "-interior"
 #: the GMM's structure and weight, chosen among the settings under ``validation-interior/``
-#: (the shipped code is ``max_rounds3``; the others ran with ``--gmm`` / ``--config``);
+#: (the shipped code is ``second_route_highlight2``, before the twenty-second session
+#: ``max_rounds3``; the others ran with ``--gmm`` / ``--config``);
 #: ``gmm_choice.json`` holds the standing of the runs that kept the silhouette ring
 GMM_CHOICE = os.path.join(OUT, "gmm_choice_interior.json")
 #: the weight sweep: every setting run before the start and the grey pass kept the
@@ -292,8 +293,10 @@ TIME_RATIO, SCORE_NOISE = 1.2, 0.01
 #: rerun of that code (``start_candidates1``) matched its stored run's wins exactly. Since
 #: the twelfth session the shipped code divides the image by its level (a result must not
 #: depend on the image's units; not a setting the rule chooses), and its run is
-#: ``max_rounds3``: a no-op override, which names a fresh folder for the same defaults
-SHIPPED_SETTING = "max_rounds3"
+#: ``max_rounds3``: a no-op override, which names a fresh folder for the same defaults.
+#: Since the twenty-second session the shipped code is ``second_route_highlight2`` (chosen
+#: against ``max_rounds3`` over two draws; under today's defaults also a no-op override)
+SHIPPED_SETTING = "second_route_highlight2"
 #: the second draw of a validation setting (``--exposure``; declared in the twentieth
 #: session, before any setting's second draw ran): one draw moves wins by a rounding
 #: (the report set's relit wins were 63 and 66 in two draws of the same code, and

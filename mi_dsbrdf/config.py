@@ -135,7 +135,14 @@ class Config:
         (``start_on_colour_posterior``) and has no grey pass; the lower
         posterior of the two is the answer. A lobe sharper than the texel
         spacing is what the coarse start at texel centres misjudges; a diffuse
-        answer does not pay for the second route
+        answer does not pay for the second route. 2 is the validation choice of
+        the twenty-second session (``natural_light.py --choose-gmm``, two
+        draws; docs/natural_light_history.md): the second route alone lost
+        wins (near-Lambertian materials took its glossy basins, the first
+        route's good maps were lost), both routes on every image
+        (any threshold below 1.5) lost relit wins on near-Lambertian
+        materials whose posterior prefers a highlight; from 2 to 3 the
+        threshold kept every win. About 1.5x the time a case
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,
@@ -190,7 +197,7 @@ class Config:
     map_levels: int = 2
     start_candidates: int = 1
     start_on_colour_posterior: bool = False
-    second_route_highlight: float | None = None
+    second_route_highlight: float | None = 2.0
     texel_samples: int = 2
     grey_texel_samples: int | None = 1
     reflectance_pairs: int = 500_000

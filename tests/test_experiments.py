@@ -189,10 +189,11 @@ def test_the_benchmarks_infer_from_the_app_s_pixels(monkeypatch, data, tmp_path)
 def test_a_case_s_config_overrides_its_rounds(data, tmp_path):
     """``weights`` may name any Config field, the case's own rounds too (a validation
     setting ``--config max_rounds=2`` ran into a TypeError before): one more round
-    in each of the two passes."""
+    in each of the two passes (without the second route, whose rounds would
+    depend on the answer's highlight)."""
     def run(weights):
         case = tiny({"id": "r", "kind": "probe", "material": "gold-metallic-paint", "probe": "probulator/grace.hdr",
-                     "priors": True, "weights": weights})
+                     "priors": True, "weights": dict(weights, second_route_highlight=None)})
         return ev.run_case(case, data, str(tmp_path / "cache"))
     assert run({"max_rounds": 2})["rounds"] == run({})["rounds"] + 2
 

@@ -33,6 +33,13 @@ colour from that start (chromaticities and map colour free), unless the
 image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides).
 ``Config.grey_rounds`` sets the grey pass's rounds; 0 leaves it out of a
 colour image's inference (an option: faster, one validation map win fewer).
+Second route (``Config.second_route_highlight``, not in the paper): an answer
+with a highlight is checked against a second inference, whose starts are
+judged on the colour pass's own posterior (the full map, texels lit from
+2 x 2 directions: ``Config.start_on_colour_posterior``) and which has no grey
+pass; the lower posterior wins. The coarse start at texel centres misjudges
+lobes sharper than the texel spacing, and for glossy materials it chose basins
+far above the truth's (:func:`route`).
 The start runs on the map at half its resolution (:func:`map_sizes`,
 ``Config.map_levels``); its map moves up by :func:`resample`.
 
