@@ -59,7 +59,7 @@ def recover_args(**given):
     preset, no override, the colour split on; ``given`` replaces any of them."""
     import argparse
     args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
-                start_candidates=None, grey_rounds=None, no_colour_split=False)
+                start_candidates=None, grey_rounds=None, no_second_route=False, no_colour_split=False)
     return argparse.Namespace(**dict(args, **given))
 
 
@@ -99,6 +99,16 @@ def test_grey_rounds_is_an_option_of_recover(tmp_path, capsys):
                  "--out", str(tmp_path / "o"), "--grey-rounds", "-1"])
     err = capsys.readouterr().err
     assert code != 0 and "grey_rounds" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_second_route_is_on_by_default_and_no_second_route_turns_it_off(capsys):
+    import pytest
+    from mi_dsbrdf.app.cli import _config
+    assert _config(recover_args()).second_route_highlight == 2.0
+    assert _config(recover_args(no_second_route=True)).second_route_highlight is None
+    with pytest.raises(SystemExit):
+        main(["recover", "--help"])
+    assert "--no-second-route" in capsys.readouterr().out
 
 
 def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys):

@@ -170,6 +170,7 @@ def _progress(progress):
     bar = tqdm(desc="recover", unit="round")
 
     def report(row):
+        bar.set_description("recover, second route" if row.get("route") else "recover", refresh=False)
         bar.set_postfix(nlp="%.4g" % row["neg_log_posterior"], refresh=False)
         bar.update()
     return report, bar.close
