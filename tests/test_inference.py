@@ -249,19 +249,24 @@ def test_grey_rounds_sets_the_grey_pass_s_budget_and_zero_leaves_it_out():
         Config(grey_rounds=-1)
 
 
+def sky_case():
+    """(the shipped model, the 8x16 view of the TRUTH sphere, its (RES, RES, 3) image
+    under the procedural sky): the small map case the driver's tests share."""
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    s = sphere({"type": "dsbrdf", "material": TRUTH})
+    ts = TexelSum(s, s.shapes()[0], (8, 16))
+    img = np.zeros((RES * RES, 3))
+    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    return model_data.shipped_model(), ts, img.reshape(RES, RES, 3)
+
+
 def test_start_on_colour_posterior_judges_the_starts_on_the_colour_pass_s_posterior():
     """``Config.start_on_colour_posterior``: the starts are scored on the full map
     by the posterior the colour pass minimises, so that pass (straight after the
     start with ``grey_rounds`` 0) never ends a round above the chosen start's value
     (on the coarse map they are scored on another posterior); a grey image, which
     has no colour pass, keeps the coarse start, number for number."""
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    model = model_data.shipped_model()
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (8, 16))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
-    img = img.reshape(RES, RES, 3)
+    model, ts, img = sky_case()
     base = Config(map_size=(8, 16), second_route_highlight=None,
                   max_rounds=1, grey_rounds=0, block_iters=3, illumination_iters=10)
     on = dataclasses.replace(base, start_on_colour_posterior=True)
@@ -284,13 +289,7 @@ def test_second_route_runs_only_above_its_highlight_and_the_lower_posterior_wins
     runs after the first, and the answer is the end of the one whose last colour
     round is lower; far above any answer it never runs, and the run is the one
     without a second route (None), number for number."""
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    model = model_data.shipped_model()
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (8, 16))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
-    img = img.reshape(RES, RES, 3)
+    model, ts, img = sky_case()
     base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10)
     off, never, always = (recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, second_route_highlight=h))
                           for h in (None, 1e9, 1e-9))
@@ -345,13 +344,7 @@ def test_envmap_recovery_does_not_depend_on_the_images_units():
     material and the map in those units: the map's log bounds and the black of
     unseen texels are absolute constants, which the image times 2^20 once crossed
     (psi moved by up to 10 at 1e-12, 0.3-1.2 at 1e-6 and 1e6)."""
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    model = model_data.shipped_model()
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (8, 16))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
-    img = img.reshape(RES, RES, 3)
+    model, ts, img = sky_case()
     cfg = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10, texel_samples=1)
     one = recover_envmap(ts, img, ts.mask, model, cfg)
     tiny = recover_envmap(ts, img * 2.0 ** -40, ts.mask, model, cfg)       # exact in binary: bit for bit
