@@ -115,15 +115,17 @@ def speed() -> dict:
     from inference_cases import envmap_case
     from mi_dsbrdf.config import PRESETS
     from mi_dsbrdf.inference import recover_envmap
+    from mi_dsbrdf.inference.pixels import usable_pixels
     from mi_dsbrdf.model import model_file as model_data
     model = model_data.shipped_model()
     _, img, ts = envmap_case()
+    mask = usable_pixels(ts.mask, img)     # the app's pixels, as inference_cases.py
     out = {k: [] for k in SPEED_SETTINGS}
     for _ in range(2):
         for name, overrides in SPEED_SETTINGS.items():
             cfg = dataclasses.replace(PRESETS["benchmarked"], **overrides)
             t0 = time.perf_counter()
-            recover_envmap(ts, img, ts.mask, model, cfg)
+            recover_envmap(ts, img, mask, model, cfg)
             out[name].append(time.perf_counter() - t0)
             print("%s (grey pass %d, colour pass %d, colour split %s, %d start candidates): %.1f s"
                   % (name, cfg.grey_texel_samples, cfg.texel_samples, "on" if cfg.colour_split else "off",

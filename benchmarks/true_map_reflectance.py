@@ -83,12 +83,10 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     brightness = post.observed.mean(axis=1)
     quartile = np.searchsorted(np.quantile(brightness[post.keep], [0.25, 0.5, 0.75]), brightness)
 
-    def bins_for(log_map):                  # as recover_envmap fixes them: unseen texels at the darkest seen
-        return post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
-
     def point(psi, logits, log_map):
         T = post.transport(psi, logits)
-        total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins_for(log_map))
+        bins = envmap.entropy_bins(post, log_map, seen)
+        total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins)
         values = post.material(psi, logits).eval(samples.theta_h, samples.theta_d)
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
         image = apply_transport(T, L)
@@ -114,8 +112,8 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     _, psi, logits, L = min(ends, key=lambda e: e[0])
     x = np.where(seen[..., None], np.log(np.maximum(L.reshape(H, W, 3), 1e-300)), envmap.BLACK)
     true_map = point(psi, logits, x)
-    x = single_blas_thread(envmap.illumination_block)(post, x, post.transport(psi, logits), seen, bins_for(x),
-                                                      False, REFINE_ITERS)
+    x = single_blas_thread(envmap.illumination_block)(post, x, post.transport(psi, logits), seen,
+                                                      envmap.entropy_bins(post, x, seen), False, REFINE_ITERS)
     best_map = point(psi, logits, x)
     return {"material": material, "probe": probe, "truth_highlight_ratio":
             highlight_ratio(samples.values, samples.theta_h, samples.theta_d),

@@ -101,17 +101,13 @@ def case_posterior(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), r
     return post, model, samples, ex.downsample(truth, *map_size), ~post.view.unseen.reshape(map_size), img, ts, mask
 
 
-def bins_for(post, log_map, seen):
-    """The entropy prior's bins as recover_envmap fixes them: unseen texels at the darkest seen."""
-    return post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
-
-
 def score(post, samples, small, seen, psi, logits, log_map, T) -> dict:
     """The negative log posterior term by term at (psi, logits, log map) whose
     transport is ``T``, the BRDF's Eq. 20 (paper) and highlight ratio, the map's error."""
     from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
     from mi_dsbrdf.inference import envmap
-    total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins_for(post, log_map, seen))
+    bins = envmap.entropy_bins(post, log_map, seen)
+    total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins)
     values = post.material(psi, logits).eval(samples.theta_h, samples.theta_d)
     L = np.where(seen[..., None], np.exp(log_map), 0.0)
     return dict(neg_log_posterior=total, likelihood=lik, **terms,
@@ -135,8 +131,8 @@ def truth_point(post, model, samples, small, seen) -> tuple:
     level = np.median(post.observed[post.keep] / np.maximum(apply_transport(T, small.reshape(-1, 3))[post.keep],
                                                             1e-300))
     x = np.where(seen[..., None], np.log(np.maximum(small * level, 1e-300)), envmap.BLACK)
-    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, bins_for(post, x, seen), False,
-                                                      REFINE_ITERS)
+    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, envmap.entropy_bins(post, x, seen),
+                                                      False, REFINE_ITERS)
     return psi, logits, x, T
 
 

@@ -8,7 +8,7 @@ import pytest
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import ConfigError, InputError
 from mi_dsbrdf.inference import recover_envmap, recover_light
-from mi_dsbrdf.inference.objective import direction_from_angles
+from mi_dsbrdf.inference.objective import Posterior, direction_from_angles
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.inference.forward import TexelSum
@@ -145,24 +145,48 @@ def test_envmap_inference_decreases_the_posterior_and_masks_unseen_texels():
 
 
 
-def test_envmap_inference_runs_from_the_starts_it_is_given():
-    """``starts`` replaces the mean material and the GMM means: one start, one
-    start row, and two different starts give two different results."""
+def sky_case():
+    """(the shipped model, the 8x16 view of the TRUTH sphere, its (RES, RES, 3) image
+    under the procedural sky): the small map case the driver's tests share."""
     from mi_dsbrdf.inference.latlong import procedural_sky
-    model = model_data.shipped_model()
     s = sphere({"type": "dsbrdf", "material": TRUTH})
     ts = TexelSum(s, s.shapes()[0], (8, 16))
     img = np.zeros((RES * RES, 3))
     img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    return model_data.shipped_model(), ts, img.reshape(RES, RES, 3)
+
+
+def test_envmap_inference_runs_from_the_starts_it_is_given():
+    """``starts`` replaces the mean material and the GMM means: one start, one
+    start row, and two different starts give two different results."""
+    model, ts, img = sky_case()
     cfg = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10)
     found = []
     for psi in (np.zeros(model.basis.n_bases), model.library_material(TRUTH).psi):
-        res = recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, cfg, colour=False, starts=[psi])
+        res = recover_envmap(ts, img, ts.mask, model, cfg, colour=False, starts=[psi])
         assert [r["pass"] for r in res.log].count("start") == 1
         found.append((res.psi, res.log[0]["neg_log_posterior"]))
     assert not np.allclose(found[0][0], found[1][0]) and found[0][1] != found[1][1]
     with pytest.raises(InputError, match="starts must be"):
-        recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, cfg, starts=[np.zeros(3)])
+        recover_envmap(ts, img, ts.mask, model, cfg, starts=[np.zeros(3)])
+
+
+def test_entropy_bins_span_the_seen_texels_only():
+    """Unseen texels (at BLACK, log -30) do not stretch the entropy prior's bins:
+    they span the seen texels' range as if the unseen ones held the darkest seen value."""
+    from mi_dsbrdf.inference.envmap import BLACK, entropy_bins
+    model, ts, img = sky_case()
+    post = Posterior(ts, img, ts.mask, model, Config(map_size=(8, 16)))
+    x = np.log(np.linspace(0.5, 4.0, 8 * 16)).reshape(8, 16, 1).repeat(3, axis=2)     # grey
+    seen = np.ones((8, 16), bool)
+    seen[:2] = False
+    with_black = np.where(seen[..., None], x, BLACK)
+    centres, sigma = entropy_bins(post, with_black, seen)
+    lum = x[..., 0][seen]
+    np.testing.assert_allclose(sigma, (lum.max() - lum.min()) / post.entropy.n_bins * post.entropy.bandwidth_bins)
+    np.testing.assert_allclose(centres[[0, -1]], [lum.min() - 3 * sigma, lum.max() + 3 * sigma])
+    assert post.entropy.bins_for(with_black)[0][0] < BLACK        # what the black texels would have done
+
 
 def test_coarse_to_fine_map_sizes_and_resampling():
     from mi_dsbrdf.inference.envmap import BLACK, map_sizes, resample
@@ -201,14 +225,9 @@ def test_grey_texel_samples_runs_the_start_and_grey_pass_at_texel_centres():
     """``Config.grey_texel_samples`` 1 with ``texel_samples`` 2: the start and the
     grey pass are those of a texel-centre run, number for number; the colour pass
     lights each texel from 2 x 2 directions and ends elsewhere."""
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    model = model_data.shipped_model()
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (8, 16))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    model, ts, img = sky_case()
     base = Config(map_size=(8, 16), second_route_highlight=None, max_rounds=1, block_iters=3, illumination_iters=10)
-    runs = [recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, cfg, starts=[np.zeros(model.basis.n_bases)])
+    runs = [recover_envmap(ts, img, ts.mask, model, cfg, starts=[np.zeros(model.basis.n_bases)])
             for cfg in (dataclasses.replace(base, texel_samples=1),
                         dataclasses.replace(base, texel_samples=2, grey_texel_samples=1))]
     value = [{r["pass"]: r["neg_log_posterior"] for r in res.log} for res in runs]
@@ -223,17 +242,12 @@ def test_grey_rounds_sets_the_grey_pass_s_budget_and_zero_leaves_it_out():
     """``Config.grey_rounds``: 1 runs one grey round before the colour pass's; 0 runs
     the colour pass straight from the start's choice (the start's rows unchanged);
     a grey image, whose only pass is the grey one, runs it for ``max_rounds``."""
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    model = model_data.shipped_model()
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (8, 16))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    model, ts, img = sky_case()
     base = Config(map_size=(8, 16), second_route_highlight=None,
                   max_rounds=2, tol=1e-12, block_iters=3, illumination_iters=10,
                   texel_samples=1)
     start = [np.zeros(model.basis.n_bases)]
-    runs = {g: recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, dataclasses.replace(base, grey_rounds=g),
+    runs = {g: recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, grey_rounds=g),
                               starts=start) for g in (None, 1, 0)}
     passes = {g: [r["pass"] for r in res.log] for g, res in runs.items()}
     assert passes[None] == ["start", "grey", "grey", "colour", "colour"]
@@ -242,22 +256,11 @@ def test_grey_rounds_sets_the_grey_pass_s_budget_and_zero_leaves_it_out():
     assert runs[0].log[0]["neg_log_posterior"] == runs[None].log[0]["neg_log_posterior"]
     final = {g: res.log[-1]["neg_log_posterior"] for g, res in runs.items()}
     assert np.isfinite(final[0]) and final[0] != final[None] and np.all(np.isfinite(runs[0].psi))
-    grey = recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model, dataclasses.replace(base, grey_rounds=0),
+    grey = recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, grey_rounds=0),
                           colour=False, starts=start)
     assert [r["pass"] for r in grey.log] == ["start", "grey", "grey"]
     with pytest.raises(ConfigError, match="grey_rounds"):
         Config(grey_rounds=-1)
-
-
-def sky_case():
-    """(the shipped model, the 8x16 view of the TRUTH sphere, its (RES, RES, 3) image
-    under the procedural sky): the small map case the driver's tests share."""
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (8, 16))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
-    return model_data.shipped_model(), ts, img.reshape(RES, RES, 3)
 
 
 def test_start_on_colour_posterior_judges_the_starts_on_the_colour_pass_s_posterior():
@@ -287,27 +290,57 @@ def test_second_route_runs_only_above_its_highlight_and_the_lower_posterior_wins
     """``Config.second_route_highlight``: above it (here any answer) a second
     inference (rows tagged ``route`` 1: its starts on the full map, no grey pass)
     runs after the first, and the answer is the end of the one whose last colour
-    round is lower; far above any answer it never runs, and the run is the one
-    without a second route (None), number for number."""
+    round is lower, repeated in a last "answer" row; far above any answer it never
+    runs, and the run is the one without a second route (None), number for number."""
     model, ts, img = sky_case()
     base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10)
     off, never, always = (recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, second_route_highlight=h))
                           for h in (None, 1e9, 1e-9))
     assert [r["neg_log_posterior"] for r in never.log] == [r["neg_log_posterior"] for r in off.log]
     np.testing.assert_array_equal(never.psi, off.psi)
-    first = [r for r in always.log if "route" not in r]
+    first = [r for r in always.log if "route" not in r and r["pass"] != "answer"]
     second = [r for r in always.log if r.get("route") == 1]
     assert [r["neg_log_posterior"] for r in first] == [r["neg_log_posterior"] for r in off.log]
     assert [r["pass"] for r in second] == ["start"] * len(reflectance_starts(model)) + ["colour"]
     assert {tuple(r["map_size"]) for r in second} == {(8, 16)}
     ends = [first[-1]["neg_log_posterior"], second[-1]["neg_log_posterior"]]
-    if ends[0] <= ends[1]:
-        np.testing.assert_array_equal(always.psi, off.psi)
-    else:
+    won = int(ends[1] < ends[0])
+    if won:
         assert not np.array_equal(always.psi, off.psi)
+    else:
+        np.testing.assert_array_equal(always.psi, off.psi)
+    # the last row is the answer's, whichever route won
+    answer = always.log[-1]
+    assert answer["pass"] == "answer" and answer["answer_route"] == won and "route" not in answer
+    assert always.neg_log_posterior == min(ends)
+    assert answer["likelihood"] == (first, second)[won][-1]["likelihood"]
+    assert "answer" not in [r["pass"] for r in never.log]
     assert off.material.highlight_ratio() > 0
     with pytest.raises(ConfigError, match="second_route_highlight"):
         Config(second_route_highlight=0)
+
+
+def test_final_map_refits_the_map_only_and_never_raises_the_posterior():
+    """``Config.final_map_iters``: one more illumination block after the answer,
+    its material held: the material is the run's without it, number for number,
+    the map moves, and the last row's posterior is no higher (a grey image's
+    block is grey: one value per texel)."""
+    model, ts, img = sky_case()
+    base = Config(map_size=(8, 16), second_route_highlight=None, max_rounds=1, block_iters=3,
+                  illumination_iters=5)
+    start = [np.zeros(model.basis.n_bases)]
+    for colour in (True, False):
+        off, on = (recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, final_map_iters=n),
+                                  colour=colour, starts=start) for n in (0, 40))
+        assert [r["pass"] for r in on.log] == [r["pass"] for r in off.log] + ["final map"]
+        np.testing.assert_array_equal(on.psi, off.psi)
+        np.testing.assert_array_equal(on.chromaticity, off.chromaticity)
+        assert on.log[-1]["kept"] and on.neg_log_posterior < off.neg_log_posterior
+        assert not np.allclose(on.illumination, off.illumination)
+        if not colour:
+            np.testing.assert_allclose(on.illumination[on.seen].std(axis=-1), 0, atol=1e-12)
+    with pytest.raises(ConfigError, match="final_map_iters"):
+        Config(final_map_iters=-1)
 
 
 def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
@@ -315,15 +348,10 @@ def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     run the grey pass (rows tagged with the candidate); the first candidate's
     pass is the one-candidate run's, number for number, and the colour pass
     continues from the candidate whose grey pass ended lowest."""
-    from mi_dsbrdf.inference.latlong import procedural_sky
-    model = model_data.shipped_model()
-    s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (8, 16))
-    img = np.zeros((RES * RES, 3))
-    img[ts.pixels] = ts.render(procedural_sky(8, 16).astype(np.float64))
+    model, ts, img = sky_case()
     base = Config(map_size=(8, 16), second_route_highlight=None,
                   max_rounds=1, block_iters=3, illumination_iters=10, texel_samples=1)
-    one, two = (recover_envmap(ts, img.reshape(RES, RES, 3), ts.mask, model,
+    one, two = (recover_envmap(ts, img, ts.mask, model,
                                dataclasses.replace(base, start_candidates=n)) for n in (1, 2))
     starts = [r["neg_log_posterior"] for r in two.log if r["pass"] == "start"]
     assert starts == [r["neg_log_posterior"] for r in one.log if r["pass"] == "start"] and len(starts) >= 2

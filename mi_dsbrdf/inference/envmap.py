@@ -37,9 +37,12 @@ Second route (``Config.second_route_highlight``, not in the paper): an answer
 with a highlight is checked against a second inference, whose starts are
 judged on the colour pass's own posterior (the full map, texels lit from
 2 x 2 directions: ``Config.start_on_colour_posterior``) and which has no grey
-pass; the lower posterior wins. The coarse start at texel centres misjudges
-lobes sharper than the texel spacing, and for glossy materials it chose basins
-far above the truth's (:func:`route`).
+pass; the lower posterior wins, and a last row ``{"pass": "answer",
+"answer_route": 0 or 1}`` repeats the winner's figures. The coarse start at
+texel centres misjudges lobes sharper than the texel spacing, and for glossy
+materials it chose basins far above the truth's (:func:`route`).
+Final map (``Config.final_map_iters``, off by default): one more illumination
+block with the answer's material held (:func:`final_map`).
 The start runs on the map at half its resolution (:func:`map_sizes`,
 ``Config.map_levels``); its map moves up by :func:`resample`.
 
@@ -147,8 +150,17 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
               and not (cfg.start_on_colour_posterior and cfg.grey_rounds == 0))
     if second and Material.from_basis(model.basis, end[0], softmax_chroma(end[1])).highlight_ratio() \
             > cfg.second_route_highlight:
+        first_last = rows[-1]
         other = route(posterior, model, starts, cfg, lambda row: log(dict(row, route=1)), True, True, False)
-        end = min(end, other, key=lambda e: e[4])
+        won = int(other[4] < end[4])             # a tie keeps the first route's answer
+        # the answer's row last, so that the log's last row is the answer's posterior
+        # (Recovery.neg_log_posterior) whichever route it came from
+        log({**{k: v for k, v in (rows[-1] if won else first_last).items() if k not in ("route", "seconds")},
+             "pass": "answer", "answer_route": won})
+        end = (end, other)[won]
+    if cfg.final_map_iters:
+        end = final_map(posterior(cfg.map_size, "colour" if colour else "grey"), end, not colour,
+                        cfg.final_map_iters, log)
     psi, logits, log_map, seen, _ = end
     chroma = softmax_chroma(logits)
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
@@ -187,11 +199,10 @@ def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> t
         T = post.transport(p0, logits0)
         seen = ~post.view.unseen.reshape(H, W)
         x = constant_log_map(post, T, (H, W))
-        bins = post.entropy.bins_for(x)
+        bins = entropy_bins(post, x, seen)
         x = illumination_block(post, x, T, seen, bins, True, start_iters(cfg.illumination_iters))
         if on_colour:
-            value = posterior_at(post, p0, logits0, x, T, seen, post.entropy.bins_for(
-                np.where(seen[..., None], x, x[seen].min())))[0]
+            value = posterior_at(post, p0, logits0, x, T, seen, entropy_bins(post, x, seen))[0]
             psi, logits, scale = p0, logits0, 0.0
         else:
             L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
@@ -212,6 +223,22 @@ def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> t
     for pass_name, size in zip(passes[1:], sizes[2:]):
         end = alternate(posterior(size, pass_name), pass_name, size, *end[:3], cfg, log)
     return end
+
+
+def final_map(post, end, grey, iters, log) -> tuple:
+    """``Config.final_map_iters``: one illumination block of ``iters`` iterations
+    on the answer ``end`` (psi, logits, log map, seen, negative log posterior)
+    with its material held, on its last pass's posterior ``post``; the new map is
+    kept if the posterior falls. Logs a row ``{"pass": "final map"}``."""
+    psi, logits, log_map, seen, value = end
+    T = post.transport(psi, logits)
+    bins = entropy_bins(post, log_map, seen)
+    x = illumination_block(post, log_map, T, seen, bins, grey, iters)
+    total, lik, terms = posterior_at(post, psi, logits, x, T, seen, bins)
+    kept = total <= value
+    log({"pass": "final map", "round": 0, "neg_log_posterior": total if kept else value, "likelihood": lik,
+         **terms, "map_size": list(log_map.shape[:2]), "kept": bool(kept)})
+    return (psi, logits, x, seen, total) if kept else end
 
 
 def constant_log_map(post, T, size) -> np.ndarray:
@@ -249,7 +276,7 @@ def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=N
     rounds = cfg.grey_rounds if pass_name == "grey" and cfg.grey_rounds else cfg.max_rounds
     for rnd in range(rounds):
         # illumination block (T from the current reflectance)
-        bins = post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
+        bins = entropy_bins(post, log_map, seen)
         log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
         kept = posterior_at(post, psi, logits, log_map, T, seen, bins)
         # reflectance block, with the map's overall scale, over a subset of the
@@ -327,6 +354,15 @@ def psi_starts(model, starts=None) -> list:
     if not out or any(p.shape != (k,) or not np.all(np.isfinite(p)) for p in out):
         raise InputError("starts must be a non-empty list of finite psi vectors of %d values each" % k)
     return out
+
+
+def entropy_bins(post, log_map, seen) -> tuple:
+    """The entropy prior's bins (:meth:`~mi_dsbrdf.inference.illumination_priors.
+    EntropyPrior.bins_for`) for the log map (H, W, 3) over its ``seen`` (H, W)
+    texels: unseen ones (at ``BLACK``, below every bin) count at the darkest seen
+    value, so that they do not stretch the bins. Inference fixes them at the
+    start of each illumination block."""
+    return post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
 
 
 def posterior_at(post, psi, logits, log_map, T, seen, bins) -> tuple:
