@@ -149,12 +149,6 @@ class Config:
         set it lowers the BRDF's median ratio (0.60x to 0.50x) and raises the
         relit one (0.38x to 0.45x): over-sharp lobes on two metals
         (README, Natural light)
-    final_map_iters : 0, or the L-BFGS iterations of one last illumination
-        block after the answer is chosen, with its material held, on its last
-        pass's posterior (kept if the posterior falls). Each round ends with a
-        reflectance block, which moves the material and only the map's overall
-        scale: the answer's map is otherwise the one fitted to the material
-        before the last step. Only the map changes
     texel_samples : directions per texel side the forward model lights each
         texel from in the colour pass (s x s;
         :class:`~mi_dsbrdf.inference.forward.TexelSum`): 1 is the texel centres,
@@ -210,7 +204,6 @@ class Config:
     start_candidates: int = 1
     start_on_colour_posterior: bool = False
     second_route_highlight: float | None = 2.0
-    final_map_iters: int = 0
     texel_samples: int = 2
     grey_texel_samples: int | None = 1
     reflectance_pairs: int = 500_000
@@ -231,9 +224,6 @@ class Config:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value))
-        if not isinstance(self.final_map_iters, int) or isinstance(self.final_map_iters, bool) \
-                or self.final_map_iters < 0:
-            raise ConfigError("final_map_iters must be an integer >= 0, got %r" % (self.final_map_iters,))
         for name, low in (("grey_texel_samples", 1), ("grey_rounds", 0)):
             value = getattr(self, name)
             if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < low):

@@ -320,29 +320,6 @@ def test_second_route_runs_only_above_its_highlight_and_the_lower_posterior_wins
         Config(second_route_highlight=0)
 
 
-def test_final_map_refits_the_map_only_and_never_raises_the_posterior():
-    """``Config.final_map_iters``: one more illumination block after the answer,
-    its material held: the material is the run's without it, number for number,
-    the map moves, and the last row's posterior is no higher (a grey image's
-    block is grey: one value per texel)."""
-    model, ts, img = sky_case()
-    base = Config(map_size=(8, 16), second_route_highlight=None, max_rounds=1, block_iters=3,
-                  illumination_iters=5)
-    start = [np.zeros(model.basis.n_bases)]
-    for colour in (True, False):
-        off, on = (recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, final_map_iters=n),
-                                  colour=colour, starts=start) for n in (0, 40))
-        assert [r["pass"] for r in on.log] == [r["pass"] for r in off.log] + ["final map"]
-        np.testing.assert_array_equal(on.psi, off.psi)
-        np.testing.assert_array_equal(on.chromaticity, off.chromaticity)
-        assert on.log[-1]["kept"] and on.neg_log_posterior < off.neg_log_posterior
-        assert not np.allclose(on.illumination, off.illumination)
-        if not colour:
-            np.testing.assert_allclose(on.illumination[on.seen].std(axis=-1), 0, atol=1e-12)
-    with pytest.raises(ConfigError, match="final_map_iters"):
-        Config(final_map_iters=-1)
-
-
 def test_start_candidates_each_run_the_grey_pass_and_the_lowest_continues():
     """``Config.start_candidates`` 2: the two best starts by their posterior each
     run the grey pass (rows tagged with the candidate); the first candidate's

@@ -41,8 +41,6 @@ pass; the lower posterior wins, and a last row ``{"pass": "answer",
 "answer_route": 0 or 1}`` repeats the winner's figures. The coarse start at
 texel centres misjudges lobes sharper than the texel spacing, and for glossy
 materials it chose basins far above the truth's (:func:`route`).
-Final map (``Config.final_map_iters``, off by default): one more illumination
-block with the answer's material held (:func:`final_map`).
 The start runs on the map at half its resolution (:func:`map_sizes`,
 ``Config.map_levels``); its map moves up by :func:`resample`.
 
@@ -158,9 +156,6 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         log({**{k: v for k, v in (rows[-1] if won else first_last).items() if k not in ("route", "seconds")},
              "pass": "answer", "answer_route": won})
         end = (end, other)[won]
-    if cfg.final_map_iters:
-        end = final_map(posterior(cfg.map_size, "colour" if colour else "grey"), end, not colour,
-                        cfg.final_map_iters, log)
     psi, logits, log_map, seen, _ = end
     chroma = softmax_chroma(logits)
     return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
@@ -223,22 +218,6 @@ def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> t
     for pass_name, size in zip(passes[1:], sizes[2:]):
         end = alternate(posterior(size, pass_name), pass_name, size, *end[:3], cfg, log)
     return end
-
-
-def final_map(post, end, grey, iters, log) -> tuple:
-    """``Config.final_map_iters``: one illumination block of ``iters`` iterations
-    on the answer ``end`` (psi, logits, log map, seen, negative log posterior)
-    with its material held, on its last pass's posterior ``post``; the new map is
-    kept if the posterior falls. Logs a row ``{"pass": "final map"}``."""
-    psi, logits, log_map, seen, value = end
-    T = post.transport(psi, logits)
-    bins = entropy_bins(post, log_map, seen)
-    x = illumination_block(post, log_map, T, seen, bins, grey, iters)
-    total, lik, terms = posterior_at(post, psi, logits, x, T, seen, bins)
-    kept = total <= value
-    log({"pass": "final map", "round": 0, "neg_log_posterior": total if kept else value, "likelihood": lik,
-         **terms, "map_size": list(log_map.shape[:2]), "kept": bool(kept)})
-    return (psi, logits, x, seen, total) if kept else end
 
 
 def constant_log_map(post, T, size) -> np.ndarray:
