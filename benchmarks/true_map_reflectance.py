@@ -85,7 +85,7 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
 
     def point(psi, logits, log_map):
         T = post.transport(psi, logits)
-        bins = envmap.entropy_bins(post, log_map, seen)
+        bins = post.entropy.bins_for(log_map, seen)
         total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins)
         values = post.material(psi, logits).eval(samples.theta_h, samples.theta_d)
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
@@ -113,7 +113,7 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     x = np.where(seen[..., None], np.log(np.maximum(L.reshape(H, W, 3), 1e-300)), envmap.BLACK)
     true_map = point(psi, logits, x)
     x = single_blas_thread(envmap.illumination_block)(post, x, post.transport(psi, logits), seen,
-                                                      envmap.entropy_bins(post, x, seen), False, REFINE_ITERS)
+                                                      post.entropy.bins_for(x, seen), False, REFINE_ITERS)
     best_map = point(psi, logits, x)
     return {"material": material, "probe": probe, "truth_highlight_ratio":
             highlight_ratio(samples.values, samples.theta_h, samples.theta_d),

@@ -106,7 +106,7 @@ def score(post, samples, small, seen, psi, logits, log_map, T) -> dict:
     transport is ``T``, the BRDF's Eq. 20 (paper) and highlight ratio, the map's error."""
     from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
     from mi_dsbrdf.inference import envmap
-    bins = envmap.entropy_bins(post, log_map, seen)
+    bins = post.entropy.bins_for(log_map, seen)
     total, lik, terms = envmap.posterior_at(post, psi, logits, log_map, T, seen, bins)
     values = post.material(psi, logits).eval(samples.theta_h, samples.theta_d)
     L = np.where(seen[..., None], np.exp(log_map), 0.0)
@@ -131,7 +131,7 @@ def truth_point(post, model, samples, small, seen) -> tuple:
     level = np.median(post.observed[post.keep] / np.maximum(apply_transport(T, small.reshape(-1, 3))[post.keep],
                                                             1e-300))
     x = np.where(seen[..., None], np.log(np.maximum(small * level, 1e-300)), envmap.BLACK)
-    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, envmap.entropy_bins(post, x, seen),
+    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, post.entropy.bins_for(x, seen),
                                                       False, REFINE_ITERS)
     return psi, logits, x, T
 

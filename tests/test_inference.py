@@ -8,7 +8,7 @@ import pytest
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import ConfigError, InputError
 from mi_dsbrdf.inference import recover_envmap, recover_light
-from mi_dsbrdf.inference.objective import Posterior, direction_from_angles
+from mi_dsbrdf.inference.objective import direction_from_angles
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.inference.forward import TexelSum
@@ -169,23 +169,6 @@ def test_envmap_inference_runs_from_the_starts_it_is_given():
     assert not np.allclose(found[0][0], found[1][0]) and found[0][1] != found[1][1]
     with pytest.raises(InputError, match="starts must be"):
         recover_envmap(ts, img, ts.mask, model, cfg, starts=[np.zeros(3)])
-
-
-def test_entropy_bins_span_the_seen_texels_only():
-    """Unseen texels (at BLACK, log -30) do not stretch the entropy prior's bins:
-    they span the seen texels' range as if the unseen ones held the darkest seen value."""
-    from mi_dsbrdf.inference.envmap import BLACK, entropy_bins
-    model, ts, img = sky_case()
-    post = Posterior(ts, img, ts.mask, model, Config(map_size=(8, 16)))
-    x = np.log(np.linspace(0.5, 4.0, 8 * 16)).reshape(8, 16, 1).repeat(3, axis=2)     # grey
-    seen = np.ones((8, 16), bool)
-    seen[:2] = False
-    with_black = np.where(seen[..., None], x, BLACK)
-    centres, sigma = entropy_bins(post, with_black, seen)
-    lum = x[..., 0][seen]
-    np.testing.assert_allclose(sigma, (lum.max() - lum.min()) / post.entropy.n_bins * post.entropy.bandwidth_bins)
-    np.testing.assert_allclose(centres[[0, -1]], [lum.min() - 3 * sigma, lum.max() + 3 * sigma])
-    assert post.entropy.bins_for(with_black)[0][0] < BLACK        # what the black texels would have done
 
 
 def test_coarse_to_fine_map_sizes_and_resampling():

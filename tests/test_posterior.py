@@ -83,6 +83,22 @@ def test_entropy_prior_prefers_peaky_illumination_and_ignores_scale():
     assert e(spread + 2.0)[0] == pytest.approx(e(spread)[0], rel=1e-9)  # log-scale invariance
 
 
+def test_entropy_bins_span_the_seen_texels_only():
+    """Unseen texels (at BLACK, log -30) do not stretch the entropy prior's bins:
+    they span the seen texels' range as if the unseen ones held the darkest seen value."""
+    from mi_dsbrdf.inference.envmap import BLACK
+    prior = EntropyPrior()
+    x = np.log(np.linspace(0.5, 4.0, 8 * 16)).reshape(8, 16, 1).repeat(3, axis=2)     # grey
+    seen = np.ones((8, 16), bool)
+    seen[:2] = False
+    with_black = np.where(seen[..., None], x, BLACK)
+    centres, sigma = prior.bins_for(with_black, seen)
+    lum = x[..., 0][seen]
+    np.testing.assert_allclose(sigma, (lum.max() - lum.min()) / prior.n_bins * prior.bandwidth_bins)
+    np.testing.assert_allclose(centres[[0, -1]], [lum.min() - 3 * sigma, lum.max() + 3 * sigma])
+    assert prior.bins_for(with_black)[0][0] < BLACK        # what the black texels would have done
+
+
 def test_light_colour_prior_prices_the_maps_mean_colour_only():
     p = LightColourPrior(weight=1.0, temperature_sigma=0.26, tint_sigma=0.05)
     rng = np.random.default_rng(3)

@@ -194,10 +194,10 @@ def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> t
         T = post.transport(p0, logits0)
         seen = ~post.view.unseen.reshape(H, W)
         x = constant_log_map(post, T, (H, W))
-        bins = entropy_bins(post, x, seen)
+        bins = post.entropy.bins_for(x, seen)
         x = illumination_block(post, x, T, seen, bins, True, start_iters(cfg.illumination_iters))
         if on_colour:
-            value = posterior_at(post, p0, logits0, x, T, seen, entropy_bins(post, x, seen))[0]
+            value = posterior_at(post, p0, logits0, x, T, seen, post.entropy.bins_for(x, seen))[0]
             psi, logits, scale = p0, logits0, 0.0
         else:
             L = np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3)
@@ -255,7 +255,7 @@ def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=N
     rounds = cfg.grey_rounds if pass_name == "grey" and cfg.grey_rounds else cfg.max_rounds
     for rnd in range(rounds):
         # illumination block (T from the current reflectance)
-        bins = entropy_bins(post, log_map, seen)
+        bins = post.entropy.bins_for(log_map, seen)
         log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
         kept = posterior_at(post, psi, logits, log_map, T, seen, bins)
         # reflectance block, with the map's overall scale, over a subset of the
@@ -333,15 +333,6 @@ def psi_starts(model, starts=None) -> list:
     if not out or any(p.shape != (k,) or not np.all(np.isfinite(p)) for p in out):
         raise InputError("starts must be a non-empty list of finite psi vectors of %d values each" % k)
     return out
-
-
-def entropy_bins(post, log_map, seen) -> tuple:
-    """The entropy prior's bins (:meth:`~mi_dsbrdf.inference.illumination_priors.
-    EntropyPrior.bins_for`) for the log map (H, W, 3) over its ``seen`` (H, W)
-    texels: unseen ones (at ``BLACK``, below every bin) count at the darkest seen
-    value, so that they do not stretch the bins. Inference fixes them at the
-    start of each illumination block."""
-    return post.entropy.bins_for(np.where(seen[..., None], log_map, log_map[seen].min()))
 
 
 def posterior_at(post, psi, logits, log_map, T, seen, bins) -> tuple:

@@ -48,9 +48,15 @@ class EntropyPrior:
         self.n_bins = int(n_bins)
         self.bandwidth_bins = float(bandwidth_bins)
 
-    def bins_for(self, log_map):
-        """(centres (K,), sigma) spanning the log luminance of ``log_map`` with a 3-sigma margin."""
-        xl = np.asarray(log_map, dtype=np.float64).mean(axis=2)
+    def bins_for(self, log_map, seen=None):
+        """(centres (K,), sigma) spanning the log luminance of ``log_map`` (H, W, C)
+        with a 3-sigma margin; with ``seen`` (H, W) over those texels only: the
+        unseen ones (held black, below every bin) count at the darkest seen value,
+        so that they do not stretch the bins."""
+        x = np.asarray(log_map, dtype=np.float64)
+        if seen is not None:
+            x = np.where(seen[..., None], x, x[seen].min())
+        xl = x.mean(axis=2)
         lo, hi = float(xl.min()), float(xl.max())
         span = max(hi - lo, 1e-3)
         sigma = span / self.n_bins * self.bandwidth_bins
