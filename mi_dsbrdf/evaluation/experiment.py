@@ -293,7 +293,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     out["truth_highlight_ratio"] = highlight_ratio(samples.values, samples.theta_h, samples.theta_d)
     out["trace"] = [float(r["neg_log_posterior"]) for r in rows]
     out["rounds"] = len(rows)
-    out["relight"], out["relight_psnr"], images = _relight(case, material, merl, data)
+    out["relight"], out["relight_psnr"], images = relight(case, material, merl, data)
     if case["kind"] == "probe":
         images.update(maps)
     out["baseline"] = _do_nothing(case, model, samples, merl, data, small, seen)
@@ -311,14 +311,14 @@ def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None) -> 
     out = {"brdf_eq20_" + c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
            for c in CONVENTIONS}
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
-    out["relight"], out["relight_psnr"], _ = _relight(case, mean, merl, data)
+    out["relight"], out["relight_psnr"], _ = relight(case, mean, merl, data)
     if truth_map is not None:
         for key, c in (("illumination_error", "cosine"), ("illumination_error_paper", "paper")):
             out[key] = scale_invariant_log_error(np.ones_like(truth_map), truth_map, seen, c)
     return out
 
 
-def _relight(case, material, merl, data, res=48, map_hw=(32, 64)):
+def relight(case, material, merl, data, res=48, map_hw=(32, 64)):
     """Relit image errors (scale-invariant log error and Stanford-ORB PSNR) under
     two probes other than the case's, and the images (truth, recovered) for the
     report. ``material``: a DSBRDF Material or a Mitsuba BSDF."""
