@@ -23,7 +23,8 @@ under two other probes (:func:`~mi_dsbrdf.evaluation.experiment.relight`) and a
 posteriors came from a map that explains pixels it was fitted to and no others,
 the held-out likelihood would say so.
 
-    .venv/bin/python benchmarks/wider_starts.py              # the missed-basin cases, ~15 min on 2 cores
+    .venv/bin/python benchmarks/wider_starts.py              # the missed-basin cases, ~16 min on 2 cores
+    .venv/bin/python benchmarks/wider_starts.py --materials blue-fabric white-fabric   # these x the validation probes
 
 Validation cases only. Results in benchmarks/results/wider_starts.json (a case
 already there is not run again; delete the file to start over).
@@ -37,7 +38,7 @@ import os
 import numpy as np
 
 from experiments import CACHE, DATA
-from natural_light import ROOT
+from natural_light import ROOT, VALIDATION_MATERIALS, VALIDATION_PROBES
 from truth_posterior import OUT as TRUTH_POSTERIOR, case_posterior, run_saved, score
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "wider_starts.json")
@@ -119,11 +120,12 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
 
 def summary(rows) -> str:
     """A markdown table of the cases and the counts: where the wide search's answer
-    has the lower posterior, likelihood, held-out likelihood, and where it has the
-    better BRDF (Eq. 20 paper, cosine) and relighting."""
+    has the lower posterior, likelihood, held-out likelihood, the better BRDF
+    (Eq. 20 paper, cosine) and relighting, and the lower highlight ratio (peak /
+    off-peak of the BRDF)."""
     keys = [("neg_log_posterior", "posterior"), ("likelihood", "likelihood"),
             ("held_out_likelihood", "held-out likelihood"), ("brdf_eq20_paper", "BRDF Eq. 20 paper"),
-            ("brdf_eq20_cosine", "BRDF Eq. 20 cosine"), ("relight", "relit")]
+            ("brdf_eq20_cosine", "BRDF Eq. 20 cosine"), ("relight", "relit"), ("highlight_ratio", "highlight ratio")]
     md = ["| case | start | " + " | ".join(n + " (shipped / wide)" for _, n in keys) + " |",
           "|---|---|" + "---|" * len(keys)]
     for r in rows:
@@ -138,17 +140,22 @@ def summary(rows) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--materials", nargs="*", help="validation materials to run under every validation probe "
+                                                   "(default: the missed-basin cases)")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
+    cases = missed_basins() if not args.materials else [(m, p) for p in VALIDATION_PROBES for m in args.materials]
+    if set(m for m, _ in cases) - set(VALIDATION_MATERIALS):
+        ap.error("validation materials only: %s" % sorted(set(m for m, _ in cases) - set(VALIDATION_MATERIALS)))
     rows = []
-    for i, n, r in run_saved(run, OUT, missed_basins(), args.workers, rows):
+    for i, n, r in run_saved(run, OUT, cases, args.workers, rows):
         a, b = r["shipped"], r["wide"]
         print("[%d/%d] %-24s %-28s -log posterior %8.0f %8.0f | held-out %7.0f %7.0f | Eq. 20 %.3f %.3f | "
               "relit %.3f %.3f" % (i, n, r["material"], os.path.basename(r["probe"]), a["neg_log_posterior"],
                                    b["neg_log_posterior"], a["held_out_likelihood"], b["held_out_likelihood"],
                                    a["brdf_eq20_paper"], b["brdf_eq20_paper"], a["relight"], b["relight"]),
               flush=True)
-    print(summary(rows))
+    print(summary([r for r in rows if (r["material"], r["probe"]) in cases]))
 
 
 if __name__ == "__main__":
