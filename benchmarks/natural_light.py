@@ -121,20 +121,23 @@ def parse_config(items) -> dict:
     return out
 
 
-def setting_name(config, gmm=None, bases=None) -> str:
+def setting_name(config, gmm=None, bases=None, start=None) -> str:
     """``w_gmm100-w_gradient30000``, with ``gmm-full-2-0.01-`` before it for a GMM
-    structure other than the build's and ``bases12-`` before that for another number
-    of bases; ``defaults`` for none of them."""
+    structure other than the build's, ``bases12-`` before that for another number
+    of bases and ``start0-`` before that for one reflectance start; ``defaults`` for
+    none of them."""
     name = "-".join("%s%g" % (k, v) for k, v in sorted(config.items()))
     if gmm is not None:
         name = "-".join(["gmm"] + [str(p) for p in gmm_structure(gmm)] + ([name] if name else []))
     if bases is not None:
         name = "-".join(["bases%d" % bases] + ([name] if name else []))
+    if start is not None:
+        name = "-".join(["start%d" % start] + ([name] if name else []))
     return name or "defaults"
 
 
 def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None, exposure=1.0,
-          photons=None, bases=None) -> list:
+          photons=None, bases=None, start=None) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
     mats = [m for m in mats if materials is None or m in materials]
@@ -146,6 +149,8 @@ def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None
     extra = dict(truth) if gmm is None else dict(truth, gmm=gmm)
     if bases is not None:
         extra["bases"] = bases
+    if start is not None:                 # one reflectance start (run_case: reflectance_starts(model)[start])
+        extra["start"] = start
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
     for method in [m for m in ADAM_METHODS if m in adam]:      # after this tool's cases
@@ -381,9 +386,12 @@ def against_table(folder, reference) -> str:
 
 
 def parse_setting(name) -> tuple:
-    """(GMM structure or None, Config overrides, number of bases or None) of a
-    :func:`setting_name`."""
+    """(GMM structure or None, Config overrides, number of bases or None, the one
+    reflectance start or None) of a :func:`setting_name`."""
     parts = [] if name == "defaults" else name.split("-")
+    start = None
+    if re.fullmatch(r"start[0-9]+", parts[0] if parts else ""):
+        start, parts = int(parts[0][5:]), parts[1:]
     bases = None
     if re.fullmatch(r"bases[0-9]+", parts[0] if parts else ""):
         bases, parts = int(parts[0][5:]), parts[1:]
@@ -391,7 +399,7 @@ def parse_setting(name) -> tuple:
     if parts[:1] == ["gmm"]:
         n = 2 if parts[1] == "bic" else 4
         gmm, parts = ":".join(parts[1:n]), parts[n:]
-    return gmm, parse_config(parts), bases
+    return gmm, parse_config(parts), bases, start
 
 
 def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_draw=None) -> dict:
@@ -461,7 +469,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
     best = min(allowed, key=lambda k: complete[k]["margin"])
     for name, v in complete.items():
         v["against_best"] = paired_against(os.path.join(root, name), os.path.join(root, best))
-    gmm, config, bases = parse_setting(best)
+    gmm, config, bases, start = parse_setting(best)
     rule = "lowest mean over the measures of the median ratio to doing nothing"
     if reference is not None:
         rule += (", among the settings with no fewer wins on each measure and no fewer near-Lambertian cases "
@@ -475,6 +483,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
             "rule": rule, "cases": n_cases, "best": best, "best_config": config,
             "best_gmm": GMM if gmm is None else gmm,     # defaults: the build's structure
             "best_bases": DEFAULT_K if bases is None else bases,
+            "best_start": start,                         # None: the choice among the starts
             "reference": reference,
             "settings": complete,
             "overruled": barred,
@@ -594,6 +603,9 @@ def main(argv=None):
                     help="shot noise: each image as photon counts, N at its mean pixel (Poisson); results under "
                          "<set>-photons<N>/")
     ap.add_argument("--materials", nargs="*", help="only these materials of the set (validation only)")
+    ap.add_argument("--start", type=int, default=None, metavar="I",
+                    help="one reflectance start, the I-th of reflectance_starts (0: the mean material), instead "
+                         "of the choice among them (validation only)")
     ap.add_argument("--against", metavar="SETTING",
                     help="with --summary: this setting's scores and, case by case, against SETTING (a folder "
                          "name beside it)")
@@ -625,9 +637,9 @@ def main(argv=None):
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
         return
     config = parse_config(args.config)
-    if (config or args.gmm or args.bases or args.materials) and args.set == "report":     # the truth's sampling is a measure
+    if (config or args.gmm or args.bases or args.materials or args.start is not None) and args.set == "report":     # the truth's sampling is a measure
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
-    name = setting_name(config, args.gmm, args.bases)
+    name = setting_name(config, args.gmm, args.bases, args.start)
     if not (np.isfinite(args.exposure) and args.exposure > 0):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
     if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
@@ -640,7 +652,7 @@ def main(argv=None):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         adam = () if args.adam is None else (args.adam or ADAM_METHODS)     # --adam alone: both
         run_on_cluster(cases(args.set, config, adam, args.gmm, args.truth_samples, args.materials,
-                             args.exposure, args.photons, args.bases), out,
+                             args.exposure, args.photons, args.bases, args.start), out,
                        args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))

@@ -649,18 +649,25 @@ def test_choose_gmm_takes_the_guards_reference_from_the_command_line():
 
 
 def test_natural_light_setting_names_carry_the_number_of_bases():
-    """A setting's folder name says its models' number of bases, GMM structure and
-    Config overrides, and reads back to them; the build's structure is left out."""
+    """A setting's folder name says its one reflectance start, its models' number of
+    bases, GMM structure and Config overrides, and reads back to them; the build's structure is left out."""
     import natural_light
     name = natural_light.setting_name({"w_gmm": 100}, "full:2:0.01", 14)
     assert name == "bases14-gmm-full-2-0.01-w_gmm100"
-    assert natural_light.parse_setting(name) == ("full:2:0.01", {"w_gmm": 100}, 14)
-    assert natural_light.parse_setting("bases7") == (None, {}, 7)
-    assert natural_light.parse_setting("defaults") == (None, {}, None)
+    assert natural_light.parse_setting(name) == ("full:2:0.01", {"w_gmm": 100}, 14, None)
+    assert natural_light.parse_setting("bases7") == (None, {}, 7, None)
+    assert natural_light.parse_setting("defaults") == (None, {}, None, None)
     assert natural_light.setting_name({}) == "defaults"
     cases = natural_light.cases("validation", bases=14, materials=["teflon"])
     assert cases and all(c["bases"] == 14 for c in cases)
     assert all("bases" not in c for c in natural_light.cases("validation", materials=["teflon"]))
+    # one reflectance start (--start): every case carries it, the name leads with it and reads back
+    name = natural_light.setting_name({"max_rounds": 3}, start=0)
+    assert name == "start0-max_rounds3"
+    assert natural_light.parse_setting(name) == (None, {"max_rounds": 3}, None, 0)
+    cases = natural_light.cases("validation", start=0, materials=["teflon"])
+    assert cases and all(c["start"] == 0 for c in cases)
+    assert all("start" not in c for c in natural_light.cases("validation", materials=["teflon"]))
 
 
 def test_loo_model_with_another_number_of_bases(tmp_path):
