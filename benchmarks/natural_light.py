@@ -639,6 +639,13 @@ def main(argv=None):
     config = parse_config(args.config)
     if (config or args.gmm or args.bases or args.materials or args.start is not None) and args.set == "report":     # the truth's sampling is a measure
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
+    if args.start is not None:
+        from mi_dsbrdf.inference.reflectance import reflectance_starts
+        from mi_dsbrdf.model.model_file import shipped_model
+        n_starts = len(reflectance_starts(shipped_model()))
+        if not 0 <= args.start < n_starts:
+            sys.exit("--start must be 0 (the mean material) to %d (the GMM's means), got %d" % (n_starts - 1,
+                                                                                              args.start))
     name = setting_name(config, args.gmm, args.bases, args.start)
     if not (np.isfinite(args.exposure) and args.exposure > 0):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
