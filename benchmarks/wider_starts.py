@@ -61,10 +61,11 @@ def missed_basins() -> list:
             if descents.get((r["material"], r["probe"]), np.inf) < r["recovered"]["neg_log_posterior"]]
 
 
-def held_out_likelihood(post, img, mask, model, ts, psi, logits, log_map, seen) -> float:
+def held_out_likelihood(post, img, mask, model, ts, psi, logits, log_map, seen, T) -> float:
     """Eq. 19 of each half of a checkerboard of the pixels under the map refitted
     (HELD_OUT_ITERS L-BFGS iterations from ``log_map``, the material held) to the
-    other half, summed over the two halves; on ``post``'s pixels and offset."""
+    other half, summed over the two halves; on ``post``'s pixels and offset (``T``:
+    the material's transport on them)."""
     from mi_dsbrdf.backend import single_blas_thread
     from mi_dsbrdf.inference import envmap
     from mi_dsbrdf.inference.forward import apply_transport
@@ -72,7 +73,6 @@ def held_out_likelihood(post, img, mask, model, ts, psi, logits, log_map, seen) 
     H, W = mask.shape
     board = (np.add.outer(np.arange(H), np.arange(W)) % 2).astype(bool)
     half = board.reshape(-1)[post.view.texels.pixels]            # the checkerboard on post's pixels
-    T = post.transport(psi, logits)
     total = 0.0
     for side in (False, True):
         fit = Posterior(ts.with_map_size(seen.shape, post.cfg.texel_samples), img, mask & (board != side), model,
@@ -105,12 +105,13 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
         rec = envmap.recover_envmap(ts, img, mask, model, cfg, starts=starts)
         logits = chroma_logits(rec.chromaticity)
         log_map = np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK)
-        row = score(post, samples, small, rec.seen, rec.psi, logits, log_map, post.transport(rec.psi, logits))
+        T = post.transport(rec.psi, logits)
+        row = score(post, samples, small, rec.seen, rec.psi, logits, log_map, T)
         values = rec.material.eval(samples.theta_h, samples.theta_d)
         row["brdf_eq20_cosine"] = log_rmse_scale_invariant(values, samples.values, samples.cos_i, "cosine")[0]
         row["relight"] = float(np.mean(list(relight({"probe": probe}, rec.material, merl, data)[0].values())))
         row["held_out_likelihood"] = held_out_likelihood(post, img, mask, model, ts, rec.psi, logits, log_map,
-                                                         rec.seen)
+                                                         rec.seen, T)
         if name == "wide":
             found = [r["neg_log_posterior"] for r in rec.log if r["pass"] == "start"]
             row["start"] = names[int(np.argmin(found))]
