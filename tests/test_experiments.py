@@ -677,3 +677,55 @@ def test_loo_model_with_another_number_of_bases(tmp_path):
     assert m.basis.bases.shape[0] == 6 and "teflon" not in m.library and len(m.library) == 99
     assert m.gmm.means.shape[1] == 6
     assert len(glob.glob(str(tmp_path / "*-k6.npz"))) == 1
+
+
+def test_map_evidence_hessian_is_the_likelihood_fisher_and_the_prior_majoriser():
+    """benchmarks/map_evidence.py: the difference operators are the gradient prior's,
+    the likelihood's matrix is J^T J / b^2 with J the finite-difference Jacobian of
+    log(pixel + offset) in the log map, and the prior's matrix majorises the prior
+    (its quadratic bound lies above the prior around the map)."""
+    import map_evidence
+    from mi_dsbrdf.app.scenes import sphere_scene
+    from mi_dsbrdf.config import Config
+    from mi_dsbrdf.inference.forward import TexelSum, apply_transport
+    from mi_dsbrdf.inference.illumination_priors import GradientPrior
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    from mi_dsbrdf.inference.objective import Posterior
+    rng = np.random.default_rng(3)
+    x = rng.normal(0, 1, (4, 8, 3))
+    d_phi, d_theta = map_evidence.difference_operators(4, 8)
+    dphi, dth, _ = GradientPrior.differences(x)
+    for c in range(3):
+        np.testing.assert_allclose(d_phi @ x[..., c].reshape(-1), dphi[..., c].reshape(-1), rtol=1e-12)
+        np.testing.assert_allclose(d_theta @ x[..., c].reshape(-1), dth[..., c].reshape(-1), rtol=1e-12)
+    s = sphere_scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, 12)
+    ts = TexelSum(s, s.shapes()[0], (4, 8))
+    observed = np.zeros((144, 3))
+    observed[ts.pixels] = ts.render(procedural_sky(4, 8))
+    post = Posterior(ts, observed.reshape(12, 12, 3), ts.mask, model_data.shipped_model(), Config(map_size=(4, 8)))
+    T = post.transport(np.zeros(post.k), np.zeros((post.R, 2)))
+    seen = ~post.view.unseen.reshape(4, 8)
+    x = np.log(procedural_sky(4, 8).astype(np.float64)) + rng.normal(0, 0.3, (4, 8, 3))
+    idx = np.flatnonzero(seen.reshape(-1))
+
+    def log_pixels(x):
+        return np.log(apply_transport(T, np.where(seen[..., None], np.exp(x), 0.0).reshape(-1, 3))[post.keep]
+                      + post.offset)
+    Hl = map_evidence.likelihood_hessians(post, x, T, seen)
+    for c in (0, 2):
+        J = np.zeros((int(post.keep.sum()), idx.size))
+        for j, t in enumerate(idx):
+            e = np.zeros_like(x)
+            e.reshape(-1, 3)[t, c] = 1e-3
+            J[:, j] = (log_pixels(x + e)[:, c] - log_pixels(x - e)[:, c]) / 2e-3
+        np.testing.assert_allclose(Hl[c], J.T @ J * post.weight / post.scale ** 2, rtol=2e-3,
+                                   atol=2e-3 * np.abs(Hl[c]).max())
+    Hp = map_evidence.prior_hessian(post, x, seen)
+    v0, g0 = post.gradient(x)
+    for _ in range(5):
+        step = np.zeros_like(x)
+        step.reshape(-1, 3)[idx, 1] = rng.normal(0, 0.5, idx.size)
+        d = step.reshape(-1, 3)[idx, 1]
+        bound = v0 + float((g0 * step).sum()) + 0.5 * d @ Hp @ d
+        assert post.gradient(x + step)[0] <= bound + 1e-9 * abs(v0)
+    assert map_evidence.half_log_det(post, x, T, seen) > map_evidence.half_log_det(post, x, T * 0.0 + 1e-12, seen)
