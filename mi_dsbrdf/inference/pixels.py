@@ -9,7 +9,7 @@ it is not on a clipping plateau.
 Dropping the silhouette ring costs accuracy on images that have no such
 mixture (a render at pixel centres): on the natural-light validation set the
 BRDF's median ratio to the mean material was 0.48x with the ring and 0.56x
-without it (README, *Natural light*, *The eighteenth session*). The benchmarks
+without it (docs/natural_light_history.md, *The eighteenth session*). The benchmarks
 measure what a user gets, so they drop it too.
 """
 from __future__ import annotations
