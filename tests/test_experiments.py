@@ -729,3 +729,32 @@ def test_map_evidence_hessian_is_the_likelihood_fisher_and_the_prior_majoriser()
         bound = v0 + float((g0 * step).sum()) + 0.5 * d @ Hp @ d
         assert post.gradient(x + step)[0] <= bound + 1e-9 * abs(v0)
     assert map_evidence.half_log_det(post, x, T, seen) > map_evidence.half_log_det(post, x, T * 0.0 + 1e-12, seen)
+
+
+def test_wider_starts_and_map_evidence_summaries_count_and_choose_as_documented():
+    """benchmarks/wider_starts.py counts the cases where the wide search's answer is
+    lower, measure by measure; benchmarks/map_evidence.py's table picks, per criterion,
+    the answer (never the truth's point) with the lowest E plus that criterion's term."""
+    import map_evidence
+    import wider_starts
+
+    def point(post, eq20, relit):
+        return {"neg_log_posterior": post, "likelihood": post / 2, "held_out_likelihood": post / 3,
+                "brdf_eq20_paper": eq20, "brdf_eq20_cosine": eq20 / 5, "relight": relit, "highlight_ratio": 2.0}
+    rows = [{"material": "a", "probe": "x/wells.hdr", "shipped": point(100, 1.0, 0.1),
+             "wide": dict(point(90, 1.5, 0.05), start="gmm1")},
+            {"material": "b", "probe": "x/quarry.hdr", "shipped": point(100, 1.0, 0.1),
+             "wide": dict(point(120, 0.5, 0.2), start="mean")}]
+    md = wider_starts.summary(rows)
+    assert "| a × wells | gmm1 | 100 / 90 |" in md
+    assert ("Of 2 cases, the wide search's answer is lower in: posterior 1, likelihood 1, held-out likelihood 1, "
+            "BRDF Eq. 20 paper 1, BRDF Eq. 20 cosine 1, relit 1, highlight ratio 0.") in md
+
+    def answer(name, e, own, fixed, eq20):
+        return {"name": name, "neg_log_posterior": e, "half_log_det_own": own, "half_log_det_fixed": fixed,
+                "brdf_eq20_paper": eq20}
+    rows = [{"material": "c", "probe": "x/quarry.hdr", "answers": [
+        answer("shipped", 1000, 500, 400, 0.9), answer("start0", 990, 530, 405, 1.2),
+        answer("start1", 1010, 450, 420, 0.3), answer("truth", 100, 0, 0, 0.1)]}]
+    md = map_evidence.summary(rows)
+    assert "| c × quarry | 0.900 | start0 1.200 | start1 0.300 | start0 1.200 | 20 | 80 | 20 |" in md
