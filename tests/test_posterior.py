@@ -26,6 +26,11 @@ def test_likelihood_gradient_and_stability():
     v, g = log_likelihood_terms(model, obs, mask, offset=1e-3)
     fd = finite_differences(lambda m: log_likelihood_terms(m, obs, mask, 1e-3)[0], model)
     np.testing.assert_allclose(g, fd, rtol=1e-4, atol=1e-6)
+    # a wider kink (Config.likelihood_kink): its own gradient, and a smaller cost (residuals below it count less)
+    vk, gk = log_likelihood_terms(model, obs, mask, 1e-3, kink=0.05)
+    fd = finite_differences(lambda m: log_likelihood_terms(m, obs, mask, 1e-3, kink=0.05)[0], model)
+    np.testing.assert_allclose(gk, fd, rtol=1e-4, atol=1e-6)
+    assert vk < v
     assert np.all(g[3, 4] == 0)
     assert log_likelihood_terms(model, obs, mask, 1e-3, grad=False) == (v, None)
     # exact fit: zero, and the kink is smooth (finite, zero gradient)

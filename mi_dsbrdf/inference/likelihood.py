@@ -11,15 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Width of the smoothed kink of |.| (in log units): |d| ~ sqrt(d^2 + s^2) - s.
+#: Width of the smoothed kink of |.| (in log units): |d| ~ sqrt(d^2 + s^2) - s
+#: (the default of ``Config.likelihood_kink``).
 KINK = 1e-3
 
 
-def log_likelihood_terms(model, observed, mask, offset, scale=1.0, grad=True):
+def log_likelihood_terms(model, observed, mask, offset, scale=1.0, grad=True, kink=KINK):
     """Eq. 19: a Laplacian likelihood on log pixel values,
 
         -log p(I | R, L) = sum_{p, c in mask} rho(log(model + e) - log(observed + e)) / scale,
-        rho(d) = sqrt(d^2 + KINK^2) - KINK   (|d| with a smooth kink),
+        rho(d) = sqrt(d^2 + s^2) - s   (|d| with a smooth kink of width s = ``kink``),
 
     ``model``, ``observed``: (H, W, C) float arrays (observed saturated or
     invalid pixels are excluded through ``mask`` (H, W) bool); ``offset``: e,
@@ -34,8 +35,8 @@ def log_likelihood_terms(model, observed, mask, offset, scale=1.0, grad=True):
     keep = np.asarray(mask, bool)[..., None]
     mp = np.maximum(m, 0.0) + offset
     d = np.where(keep, np.log(mp) - np.log(np.maximum(o, 0.0) + offset), 0.0)
-    r = np.sqrt(d * d + KINK * KINK)
-    value = float((r - KINK).sum()) / scale
+    r = np.sqrt(d * d + kink * kink)
+    value = float((r - kink).sum()) / scale
     if not grad:
         return value, None
     grad = np.where(keep & (m >= 0), d / r / mp, 0.0) / scale

@@ -98,6 +98,7 @@ class Posterior:
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
         self.offset = config.log_offset * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
         self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
+        self.kink = config.likelihood_kink
         self.k, self.R = model.basis.n_bases, model.basis.n_lobes
         n_usable = int(keep.sum())
         # the posterior's pixels (Config.map_pairs): all usable ones, or an evenly
@@ -233,7 +234,7 @@ class Posterior:
         """Eq. 19 of the pixel radiance ``image`` (P, 3) against ``observed`` (P, 3)
         at the pixels ``keep`` (P,), unweighted."""
         return log_likelihood_terms(image[:, None, :], observed[:, None, :], keep[:, None], self.offset,
-                                    self.scale, grad=False)[0]
+                                    self.scale, grad=False, kink=self.kink)[0]
 
     # --- illumination ------------------------------------------------------------
     def map_likelihood(self, log_map, T, seen, grad=True) -> tuple:
@@ -241,7 +242,7 @@ class Posterior:
         L = np.where(seen[..., None], np.exp(log_map), 0.0)
         image = apply_transport(T, L)
         lik, g_img = log_likelihood_terms(image[:, None, :], self.observed[:, None, :], self.keep[:, None],
-                                          self.offset, self.scale, grad)
+                                          self.offset, self.scale, grad, kink=self.kink)
         if not grad:
             return lik * self.weight, None
         return lik * self.weight, transport_adjoint(T, g_img[:, 0, :]).reshape(log_map.shape) * (L * self.weight)

@@ -18,7 +18,6 @@ import numpy as np
 
 from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
 from mi_dsbrdf.brdf.dsbrdf import passed_through
-from mi_dsbrdf.inference.likelihood import KINK
 from mi_dsbrdf.lm import Damping, levenberg_marquardt
 
 #: bound of the chromaticity variables (softmax logits): c >= ~e^-6 / 2
@@ -148,7 +147,7 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         Jd = J / mp
         # IRLS weights of the Laplacian, graduated: while most residuals are large the
         # kink is widened to their median (least squares far away, L1 near the optimum)
-        kink = max(KINK, float(np.median(np.abs(d))))
+        kink = max(post.kink, float(np.median(np.abs(d))))
         w = view.weight / (np.sqrt(d * d + kink * kink) * post.scale)
         H = (Jd * w) @ Jd.T
         g = Jd @ (w * d)
