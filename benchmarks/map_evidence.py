@@ -79,12 +79,8 @@ def prior_hessian(post, weights_map, seen) -> np.ndarray:
     """(S, S) the gradient prior's reweighted quadratic majoriser in one channel of the
     S seen texels, its weights at ``weights_map`` (H, W, 3) (the same for every channel:
     the prior's magnitude sums the channels)."""
-    from mi_dsbrdf.inference.illumination_priors import _texel_weights
-    g = post.gradient
     H, W = seen.shape
-    dphi, dth, _ = g.differences(weights_map)
-    m2 = (dphi ** 2 + dth ** 2).sum(axis=2) + g.eps ** 2
-    c = sp.diags((g.weight * _texel_weights(H, W) * g.alpha * m2 ** (g.alpha / 2 - 1)).reshape(-1))
+    c = sp.diags(post.gradient.majoriser_weights(weights_map).reshape(-1))
     d_phi, d_theta = difference_operators(H, W)
     idx = seen.reshape(-1)
     return (d_phi.T @ c @ d_phi + d_theta.T @ c @ d_theta).tocsr()[idx][:, idx].toarray()

@@ -251,8 +251,8 @@ class Config:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1):
                 raise ConfigError("%s must be a number from 0 to 1, got %r" % (name, value))
-        for name in ("tol", "likelihood_scale", "likelihood_kink", "log_offset", "gradient_eps", "light_temperature_sigma",
-                     "light_tint_sigma"):
+        for name in ("tol", "likelihood_scale", "likelihood_kink", "log_offset", "gradient_eps",
+                     "light_temperature_sigma", "light_tint_sigma"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ConfigError("%s must be a finite number > 0, got %r" % (name, value))

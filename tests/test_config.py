@@ -14,7 +14,8 @@ def test_config_is_frozen_and_validated():
         cfg.max_rounds = 5
     assert dataclasses.replace(cfg, map_size=[8, 16]).map_size == (8, 16)
     for bad in (dict(map_size=(1, 8)), dict(map_size="big"), dict(max_rounds=0), dict(block_iters=2.5),
-                dict(tol=0.0), dict(likelihood_scale=float("nan")), dict(likelihood_kink=0.0), dict(w_gmm=-1.0), dict(w_hue=float("inf")),
+                dict(tol=0.0), dict(likelihood_scale=float("nan")), dict(likelihood_kink=0.0), dict(w_gmm=-1.0),
+                dict(w_hue=float("inf")),
                 dict(reflectance_pairs=10), dict(gmm_volume=1.5), dict(gmm_volume="no"), dict(gradient_eps=0.0),
                 dict(gradient_eps=float("nan")), dict(texel_samples=0), dict(texel_samples=2.0),
                 dict(gradient_alpha=1.0), dict(gradient_alpha=0.0), dict(gradient_alpha=True)):

@@ -118,10 +118,23 @@ class GradientPrior:
         dth[:-1] = x[1:] - x[:-1]                                  # no neighbour past the poles
         return dphi, dth, inv_s
 
+    def _magnitude2(self, dphi, dth):
+        """(H, W) |grad x|^2 + eps^2, summed over the channels."""
+        return (dphi ** 2 + dth ** 2).sum(axis=2) + self.eps ** 2
+
+    def majoriser_weights(self, log_map) -> np.ndarray:
+        """(H, W) c_i = weight w_i alpha m2_i^(alpha/2 - 1) at the (H, W, C) log map: the
+        prior is bounded above, around that map, by its value plus its gradient step
+        plus 1/2 sum_i c_i (|d grad x_i|^2) (alpha < 1 makes it concave in m2), the
+        quadratic that iteratively reweighted least squares minimises."""
+        dphi, dth, _ = self.differences(log_map)
+        m2 = self._magnitude2(dphi, dth)
+        return self.weight * _texel_weights(*m2.shape) * self.alpha * m2 ** (self.alpha / 2 - 1)
+
     def __call__(self, log_map):
         dphi, dth, inv_s = self.differences(log_map)
         H_, W_, _ = dphi.shape
-        m2 = (dphi ** 2 + dth ** 2).sum(axis=2) + self.eps ** 2    # (H, W)
+        m2 = self._magnitude2(dphi, dth)                           # (H, W)
         w = _texel_weights(H_, W_)
         val = float((w * m2 ** (self.alpha / 2)).sum())
         c = (w * self.alpha * m2 ** (self.alpha / 2 - 1))[..., None]   # d val / d (m2) * 2 / 2
