@@ -48,7 +48,7 @@ import scipy.sparse as sp
 
 from experiments import CACHE, DATA
 from natural_light import ROOT, VALIDATION_MATERIALS, VALIDATION_PROBES
-from truth_posterior import case_posterior, run_saved, score, truth_point
+from truth_posterior import case_posterior, recovered_point, run_saved, score, truth_point
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "map_evidence.json")
 PEDESTRIAN, QUARRY, WELLS = VALIDATION_PROBES[1], VALIDATION_PROBES[2], VALIDATION_PROBES[0]
@@ -59,20 +59,12 @@ CASES = [("white-fabric", QUARRY), ("polyurethane-foam", PEDESTRIAN), ("blue-fab
 
 def difference_operators(H, W) -> tuple:
     """Sparse (N, N) matrices, N = H W texels in row-major order, of the gradient
-    prior's differences of one channel (:meth:`GradientPrior.differences`): d_phi
-    (wrapping, divided by sin theta in polar texel spacings) and d_theta (0 on the last row)."""
+    prior's differences of one channel (d_phi, d_theta): :meth:`GradientPrior.differences`
+    applied to every unit map (one channel each), so that they are the prior's own."""
     from mi_dsbrdf.inference.illumination_priors import GradientPrior
     N = H * W
-    inv_s = GradientPrior.differences(np.zeros((H, W, 1)))[2].reshape(H)
-    i = np.arange(N).reshape(H, W)
-    s = np.repeat(inv_s, W)
-    d_phi = sp.csr_matrix((np.concatenate([s, -s]), (np.tile(i.ravel(), 2),
-                                                     np.concatenate([np.roll(i, -1, axis=1).ravel(), i.ravel()]))),
-                          shape=(N, N))
-    rows = i[:-1].ravel()
-    d_theta = sp.csr_matrix((np.repeat([1.0, -1.0], rows.size), (np.tile(rows, 2), np.concatenate([i[1:].ravel(), rows]))),
-                            shape=(N, N))
-    return d_phi, d_theta
+    d_phi, d_theta, _ = GradientPrior.differences(np.eye(N).reshape(H, W, N))
+    return sp.csr_matrix(d_phi.reshape(N, N)), sp.csr_matrix(d_theta.reshape(N, N))
 
 
 def prior_hessian(post, weights_map, seen) -> np.ndarray:
@@ -101,17 +93,21 @@ def likelihood_hessians(post, log_map, T, seen) -> list:
     return out
 
 
-def half_log_det(post, log_map, T, seen, weights_map=None) -> float:
+def half_log_dets(post, log_map, T, seen, weights_maps) -> list:
     """1/2 log det of the posterior's approximate Hessian in the seen texels' log
-    radiance (the module doc), summed over the channels; the prior's weights at
-    ``weights_map`` (default: ``log_map``)."""
-    Hp = prior_hessian(post, log_map if weights_map is None else weights_map, seen)
-    return float(sum(0.5 * np.linalg.slogdet(Hl + Hp)[1] for Hl in likelihood_hessians(post, log_map, T, seen)))
+    radiance (the module doc), summed over the channels, once for each of
+    ``weights_maps`` (the prior's weights at that map; None: at ``log_map``). The
+    likelihood's part, the costly one, is built once."""
+    Hls = likelihood_hessians(post, log_map, T, seen)
+    out = []
+    for weights_map in weights_maps:
+        Hp = prior_hessian(post, log_map if weights_map is None else weights_map, seen)
+        out.append(float(sum(0.5 * np.linalg.slogdet(Hl + Hp)[1] for Hl in Hls)))
+    return out
 
 
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
     """Every answer of one case, scored (the module doc)."""
-    from mi_dsbrdf.brdf.chromaticity import chroma_logits
     from mi_dsbrdf.inference import envmap
     from mi_dsbrdf.inference.reflectance import reflectance_starts
     post, model, samples, small, seen, img, ts, mask = case_posterior(material, probe, data, cache, map_size, res)
@@ -120,16 +116,15 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     for name, cfg, starts in [("shipped", post.cfg, None)] + [("start%d" % i, one_route, [p]) for i, p in
                                                               enumerate(reflectance_starts(model))]:
         rec = envmap.recover_envmap(ts, img, mask, model, cfg, starts=starts)
-        logits = chroma_logits(rec.chromaticity)
-        points.append((name, rec.psi, logits, np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK),
-                       post.transport(rec.psi, logits)))
+        psi, logits, log_map = recovered_point(rec)
+        points.append((name, psi, logits, log_map, post.transport(psi, logits)))
     points.append(("truth", *truth_point(post, model, samples, small, seen)))
     shipped_map = points[0][3]
     answers = []
     for name, psi, logits, x, T in points:
         row = score(post, samples, small, seen, psi, logits, x, T)
-        row.update(name=name, half_log_det_own=half_log_det(post, x, T, seen),
-                   half_log_det_fixed=half_log_det(post, x, T, seen, shipped_map))
+        own, fixed = half_log_dets(post, x, T, seen, [None, shipped_map])
+        row.update(name=name, half_log_det_own=own, half_log_det_fixed=fixed)
         answers.append(row)
     return {"material": material, "probe": probe, "answers": answers}
 

@@ -38,7 +38,7 @@ import numpy as np
 
 from experiments import CACHE, DATA
 from natural_light import HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN, ROOT, VALIDATION_MATERIALS, VALIDATION_PROBES
-from truth_posterior import run_saved, validation_case
+from truth_posterior import recovered_point, run_saved, validation_case
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "true_map_reflectance.json")
 #: reflectance blocks from each start under the true map
@@ -64,7 +64,6 @@ def near_lambertian(materials, data=DATA) -> list:
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
     """Recover one case and score the three points (see the module doc)."""
     from mi_dsbrdf.backend import single_blas_thread
-    from mi_dsbrdf.brdf.chromaticity import chroma_logits
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.evaluation import experiment as ex
     from mi_dsbrdf.evaluation.metrics import highlight_ratio, log_rmse_scale_invariant, scale_invariant_log_error
@@ -97,8 +96,7 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
                     illumination_error=scale_invariant_log_error(L, small, seen),
                     abs_log_error_by_quartile=[float(err[post.keep & (quartile == q)].mean()) for q in range(4)])
 
-    recovered = point(rec.psi, chroma_logits(rec.chromaticity),
-                      np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK))
+    recovered = point(*recovered_point(rec))
     L0 = np.where(seen[..., None], small, 0.0).reshape(-1, 3)
     logits0 = image_chroma_logits(post.observed, post.keep, post.R)
     ends = []

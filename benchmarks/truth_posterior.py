@@ -116,6 +116,14 @@ def score(post, samples, small, seen, psi, logits, log_map, T) -> dict:
                 illumination_error=scale_invariant_log_error(L, small, seen))
 
 
+def recovered_point(rec) -> tuple:
+    """(psi, logits, log map (H, W, 3), unseen texels at ``envmap.BLACK``) of a
+    :class:`~mi_dsbrdf.inference.result.Recovery`: the point its posterior is scored at."""
+    from mi_dsbrdf.brdf.chromaticity import chroma_logits
+    from mi_dsbrdf.inference import envmap
+    return rec.psi, chroma_logits(rec.chromaticity), np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK)
+
+
 def truth_point(post, model, samples, small, seen) -> tuple:
     """The truth's point: (psi, logits, log map, transport) of the measured material's
     best basis fit under the true map at the level that matches the image, refined
@@ -138,15 +146,13 @@ def truth_point(post, model, samples, small, seen) -> tuple:
 
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
     """Recover one case and score both points (see the module doc)."""
-    from mi_dsbrdf.brdf.chromaticity import chroma_logits
     from mi_dsbrdf.inference import envmap
     from mi_dsbrdf.evaluation.metrics import highlight_ratio
     post, model, samples, small, seen, img, ts, mask = case_posterior(material, probe, data, cache, map_size, res)
     rec = envmap.recover_envmap(ts, img, mask, model, post.cfg)
     seen = rec.seen                         # the recovery's seen texels (those of the view: every pixel is used)
-    logits_r = chroma_logits(rec.chromaticity)
-    recovered = score(post, samples, small, seen, rec.psi, logits_r,
-                      np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK), post.transport(rec.psi, logits_r))
+    psi, logits, log_map = recovered_point(rec)
+    recovered = score(post, samples, small, seen, psi, logits, log_map, post.transport(psi, logits))
     return {"material": material, "probe": probe, "truth_highlight_ratio":
             highlight_ratio(samples.values, samples.theta_h, samples.theta_d),
             "recovered": recovered, "truth_fit": score(post, samples, small, seen,

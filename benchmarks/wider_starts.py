@@ -39,7 +39,7 @@ import numpy as np
 
 from experiments import CACHE, DATA
 from natural_light import ROOT, VALIDATION_MATERIALS, VALIDATION_PROBES
-from truth_posterior import OUT as TRUTH_POSTERIOR, case_posterior, run_saved, score
+from truth_posterior import OUT as TRUTH_POSTERIOR, case_posterior, recovered_point, run_saved, score
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "wider_starts.json")
 #: the current code's points of the truth_posterior cases (its recovered answers)
@@ -87,7 +87,6 @@ def held_out_likelihood(post, img, mask, model, ts, psi, logits, log_map, seen, 
 
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
     """Both answers of one case, scored (see the module doc)."""
-    from mi_dsbrdf.brdf.chromaticity import chroma_logits
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.evaluation.experiment import relight
     from mi_dsbrdf.evaluation.metrics import log_rmse_scale_invariant
@@ -103,8 +102,7 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
     for name, cfg, starts in (("shipped", post.cfg, None),
                               ("wide", wide, shipped_starts + [p for p, _ in model.library.values()])):
         rec = envmap.recover_envmap(ts, img, mask, model, cfg, starts=starts)
-        logits = chroma_logits(rec.chromaticity)
-        log_map = np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK)
+        _, logits, log_map = recovered_point(rec)
         T = post.transport(rec.psi, logits)
         row = score(post, samples, small, rec.seen, rec.psi, logits, log_map, T)
         values = rec.material.eval(samples.theta_h, samples.theta_d)

@@ -122,6 +122,10 @@ class GradientPrior:
         """(H, W) |grad x|^2 + eps^2, summed over the channels."""
         return (dphi ** 2 + dth ** 2).sum(axis=2) + self.eps ** 2
 
+    def _curvature(self, m2, w):
+        """(H, W) w_i alpha m2_i^(alpha/2 - 1): d (w_i m2_i^(alpha/2)) / d m2_i, times 2."""
+        return w * self.alpha * m2 ** (self.alpha / 2 - 1)
+
     def majoriser_weights(self, log_map) -> np.ndarray:
         """(H, W) c_i = weight w_i alpha m2_i^(alpha/2 - 1) at the (H, W, C) log map: the
         prior is bounded above, around that map, by its value plus its gradient step
@@ -129,7 +133,7 @@ class GradientPrior:
         quadratic that iteratively reweighted least squares minimises."""
         dphi, dth, _ = self.differences(log_map)
         m2 = self._magnitude2(dphi, dth)
-        return self.weight * _texel_weights(*m2.shape) * self.alpha * m2 ** (self.alpha / 2 - 1)
+        return self.weight * self._curvature(m2, _texel_weights(*m2.shape))
 
     def __call__(self, log_map):
         dphi, dth, inv_s = self.differences(log_map)
@@ -137,7 +141,7 @@ class GradientPrior:
         m2 = self._magnitude2(dphi, dth)                           # (H, W)
         w = _texel_weights(H_, W_)
         val = float((w * m2 ** (self.alpha / 2)).sum())
-        c = (w * self.alpha * m2 ** (self.alpha / 2 - 1))[..., None]   # d val / d (m2) * 2 / 2
+        c = self._curvature(m2, w)[..., None]                      # d val / d (m2) * 2 / 2
         gphi = c * dphi * inv_s
         gth = c * dth
         g = -gphi + np.roll(gphi, 1, axis=1) - gth
