@@ -137,7 +137,7 @@ def setting_name(config, gmm=None, bases=None, start=None) -> str:
 
 
 def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None, exposure=1.0,
-          photons=None, bases=None, start=None) -> list:
+          photons=None, bases=None, start=None, fits_from=None) -> list:
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
     mats = [m for m in mats if materials is None or m in materials]
@@ -151,6 +151,8 @@ def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None
         extra["bases"] = bases
     if start is not None:                 # one reflectance start (run_case: reflectance_starts(model)[start])
         extra["start"] = start
+    if fits_from is not None:             # leave-one-out models from another build's full fits
+        extra["fits_from"] = os.path.abspath(fits_from)
     out = [make_case(which, "probe", m, True, probe=p, weights=dict(config or {}), **extra)
            for m in mats for p in probes]
     for method in [m for m in ADAM_METHODS if m in adam]:      # after this tool's cases
@@ -612,6 +614,10 @@ def main(argv=None):
     ap.add_argument("--reference", default=SHIPPED_SETTING, metavar="SETTING",
                     help="with --choose-gmm: the wins guard's reference, a folder under validation-interior/ "
                          "(default the shipped code's, %s)" % SHIPPED_SETTING)
+    ap.add_argument("--fits-from", default=None, metavar="MODEL",
+                    help="leave-one-out models from the full fits stored in this model file (a build-model "
+                         "--out) instead of the shipped one's (validation only); results under "
+                         "trial-<file name>/, apart from the settings the rule chooses among")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
@@ -637,7 +643,10 @@ def main(argv=None):
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
         return
     config = parse_config(args.config)
-    if (config or args.gmm or args.bases or args.materials or args.start is not None) and args.set == "report":     # the truth's sampling is a measure
+    if args.fits_from is not None and not os.path.isfile(args.fits_from):
+        sys.exit("--fits-from: no model file %s" % args.fits_from)
+    if (config or args.gmm or args.bases or args.materials or args.start is not None
+            or args.fits_from) and args.set == "report":     # the truth's sampling is a measure
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
     if args.start is not None:
         from mi_dsbrdf.inference.reflectance import reflectance_starts
@@ -651,7 +660,8 @@ def main(argv=None):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
     if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
         sys.exit("--photons must be a finite number > 0, got %r" % args.photons)
-    out = os.path.join(OUT, args.set + PIXELS + ("-truth%d" % args.truth_samples if args.truth_samples > 1 else "")
+    trial = ("trial-" + os.path.splitext(os.path.basename(args.fits_from))[0]) if args.fits_from else ""
+    out = os.path.join(OUT, trial, args.set + PIXELS + ("-truth%d" % args.truth_samples if args.truth_samples > 1 else "")
                        + ("-exposure%g" % args.exposure if args.exposure != 1.0 else "")
                        + ("-photons%g" % args.photons if args.photons else ""), name)
     if not (args.summary or args.report):
@@ -659,7 +669,7 @@ def main(argv=None):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         adam = () if args.adam is None else (args.adam or ADAM_METHODS)     # --adam alone: both
         run_on_cluster(cases(args.set, config, adam, args.gmm, args.truth_samples, args.materials,
-                             args.exposure, args.photons, args.bases, args.start), out,
+                             args.exposure, args.photons, args.bases, args.start, args.fits_from), out,
                        args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))

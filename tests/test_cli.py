@@ -123,3 +123,12 @@ def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys
     assert main(["build-model", "--merl", str(tmp_path), "--out", str(tmp_path / "m.npz")]) == 1
     assert "no MERL .binary files" in capsys.readouterr().err
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_build_model_names_a_bad_fit_anchor(tmp_path, capsys):
+    out = tmp_path / "m.npz"
+    for bad in (["--fit-anchor", "-1"], ["--fit-anchor", "nan"], ["--fit-anchor", "0.003", "--fit-anchor-lobes", "3"]):
+        assert main(["build-model", "--merl", str(tmp_path), "--out", str(out)] + bad) == 1
+        err = capsys.readouterr().err
+        assert "--fit-anchor" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists()

@@ -209,7 +209,7 @@ def test_run_case_scores_a_point_light(data, tmp_path):
     assert r["images"]["pisa"].shape == (2, 48, 48, 3)
     # keyed on the shipped model and the GMM structure: a rebuilt model does not reuse this one
     assert os.path.exists(tmp_path / "cache" / ("loo-gold-metallic-paint-%s-%s.npz" % (
-        ev.shipped_model_hash(), "-".join(map(str, gmm_structure(GMM))))))
+        ev.model_file_hash(), "-".join(map(str, gmm_structure(GMM))))))
 
 
 def test_runner_is_resumable_and_the_report_is_written(data, tmp_path):
@@ -759,3 +759,25 @@ def test_wider_starts_and_map_evidence_summaries_count_and_choose_as_documented(
         answer("start1", 1010, 450, 420, 0.3), answer("truth", 100, 0, 0, 0.1)]}]
     md = map_evidence.summary(rows)
     assert "| c × quarry | 0.900 | start0 1.200 | start1 0.300 | start0 1.200 | 20 | 80 | 20 |" in md
+
+
+def test_leave_one_out_models_from_another_build_s_fits(tmp_path):
+    """``fits_from``: the leave-one-out model is built from that file's full fits, cached
+    under that file's hash (never the shipped model's leave-one-out model)."""
+    from mi_dsbrdf.model.build import save_model
+    arrays = dict(model_data.shipped_model().arrays)
+    i = list(arrays["fit_names"]).index("white-fabric")
+    controls = arrays["fit_controls"].copy()
+    controls[i, 0, 1] += 3.0                     # another build: white-fabric's broad lobe sharper
+    arrays["fit_controls"] = controls
+    other = tmp_path / "other.npz"
+    save_model(other, arrays)
+    cache = str(tmp_path / "cache")
+    shipped = ev.loo_model("chrome", cache)
+    trial = ev.loo_model("chrome", cache, fits_from=str(other))
+    assert ev.model_file_hash(str(other)) != ev.model_file_hash()
+    assert os.path.exists(os.path.join(cache, "loo-chrome-%s-%s.npz" % (
+        ev.model_file_hash(str(other)), "-".join(map(str, gmm_structure(GMM))))))
+    assert "chrome" not in list(trial.arrays["library_names"])
+    gap = np.abs(trial.arrays["mean"] - shipped.arrays["mean"]).max()
+    np.testing.assert_allclose(gap, 3.0 / 99, rtol=1e-6)      # one of 99 fits moved by 3

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import sys
 
@@ -17,6 +18,7 @@ from mi_dsbrdf.app.scenes import scene_path
 from mi_dsbrdf.config import PRESETS
 from mi_dsbrdf.errors import InputError, MiDsbrdfError
 from mi_dsbrdf.model.build import GMM, build_model
+from mi_dsbrdf.model.fitting import OBJECTIVE
 from mi_dsbrdf.model.model_file import SHIPPED
 
 
@@ -65,8 +67,14 @@ def cmd_build_model(args):
     out = args.out or SHIPPED
     if os.path.exists(out) and not args.force:
         raise InputError("%s exists; pass --force to replace it" % out)
+    if not (math.isfinite(args.fit_anchor) and args.fit_anchor >= 0):
+        raise InputError("--fit-anchor must be a finite number >= 0, got %r" % args.fit_anchor)
+    if not args.fit_anchor_lobes or any(r not in (0, 1, 2) for r in args.fit_anchor_lobes):
+        raise InputError("--fit-anchor-lobes takes lobes 0, 1 and 2 (0 the broadest), got %s" % args.fit_anchor_lobes)
+    objective = dataclasses.replace(OBJECTIVE, anchor_weight=args.fit_anchor,
+                                    anchor_lobes=tuple(sorted(set(args.fit_anchor_lobes))))
     a = build_model(args.merl, out, k=args.k, exclude=args.exclude, workers=args.workers,
-                    fits_from=args.fits_from, gmm=args.gmm)
+                    fits_from=args.fits_from, gmm=args.gmm, objective=objective)
     info = json.loads(str(a["build_info"]))
     print("model with %d bases (%.1f%% of the curve variance), %d library materials, GMM of %d %s components, "
           "hue kappa_h %.3g: %s (%.0f s)" % (
@@ -177,6 +185,11 @@ def main(argv=None):
                    help="reuse the full per-material fits stored in this model file")
     p.add_argument("--gmm", default=GMM, metavar="STRUCTURE",
                    help="the GMM prior's structure: 'bic' or 'full|diag|tied:components:reg' (default %s)" % GMM)
+    p.add_argument("--fit-anchor", type=float, default=0.0, metavar="W",
+                   help="pull each full fit's control values towards their lobe's anchor with weight W "
+                        "(FitObjective.anchor_weight; default 0, off; the twenty-sixth session tried 0.003)")
+    p.add_argument("--fit-anchor-lobes", type=int, nargs="+", default=[0, 1, 2], metavar="LOBE",
+                   help="the lobes --fit-anchor holds (default 0 1 2)")
     p.add_argument("--force", action="store_true", help="replace an existing model file")
     p.set_defaults(func=cmd_build_model)
 

@@ -11,6 +11,8 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
      "spp": samples per pixel (Adam methods), "gmm": the leave-one-out model's GMM
      structure (optional, :func:`~mi_dsbrdf.model.build.gmm_structure`; default the build's),
      "bases": the leave-one-out model's number of bases k (optional; default the build's),
+     "fits_from": the model file whose stored full fits the leave-one-out model is built from
+     (optional; default the shipped one),
      "truth_samples": directions per texel side of the probe's truth render (optional, default 1:
      the texel centres; the probe's map integrated over each texel's footprint as s x s directions),
      "exposure": the rendered image's factor (optional, probes, default 1: the result must not
@@ -144,13 +146,15 @@ def shot_noise(image, mask, photons, seed) -> np.ndarray:
     return rng.poisson(np.maximum(img, 0.0) / unit) * unit
 
 
-def loo_model(name, cache, gmm=None, k=None):
+def loo_model(name, cache, gmm=None, k=None, fits_from=None):
     """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
     library from the other 99 fits; the GMM of structure ``gmm``, default the
     build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
-    the build's ``DEFAULT_K``), cached as ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``,
-    h the first 12 hex digits of the shipped model file's SHA-256, so that a
-    rebuilt model never reuses a leave-one-out model of the one before.
+    the build's ``DEFAULT_K``; the full fits stored in the model file
+    ``fits_from``, default the shipped one), cached as
+    ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``, h the first 12 hex digits of that
+    model file's SHA-256, so that a rebuilt model never reuses a leave-one-out
+    model of the one before.
 
     The library is not refitted in the leave-one-out basis (its psi are the FPCA
     scores; seconds instead of minutes): inference does not use it, and the
@@ -159,16 +163,17 @@ def loo_model(name, cache, gmm=None, k=None):
     gmm = GMM if gmm is None else gmm
     k = DEFAULT_K if k is None else int(k)
     tag = "-".join(map(str, gmm_structure(gmm))) + ("" if k == DEFAULT_K else "-k%d" % k)
-    path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, shipped_model_hash(), tag))
+    source = model_data.SHIPPED if fits_from is None else fits_from
+    path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, model_file_hash(source), tag))
     if not os.path.exists(path):
-        fits = stored_fits(model_data.shipped_model().arrays)
+        fits = stored_fits(model_data.load_model(source).arrays)
         save_model(path, build_from_fits(fits, k=k, exclude=[name], refit=False, progress=False, gmm=gmm))  # atomic
     return model_data.load_model(path)
 
 
-def shipped_model_hash() -> str:
-    """First 12 hex digits of the SHA-256 of the shipped model file."""
-    with open(model_data.SHIPPED, "rb") as f:
+def model_file_hash(path=None) -> str:
+    """First 12 hex digits of the SHA-256 of the shipped model file (or of ``path``)."""
+    with open(model_data.SHIPPED if path is None else path, "rb") as f:
         return hashlib.sha256(f.read()).hexdigest()[:12]
 
 
@@ -221,7 +226,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
     name = case["material"]
     res, (H, W) = case["res"], case.get("map", (16, 32))
-    model = loo_model(name, cache, case.get("gmm"), case.get("bases"))
+    model = loo_model(name, cache, case.get("gmm"), case.get("bases"), case.get("fits_from"))
     samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, name))
     merl = {"type": "merl", "nbrdf": nbrdf, "material": name}
     shape = case.get("shape", "sphere")

@@ -36,7 +36,7 @@ from mi_dsbrdf.brdf.curves import CurveBasis
 from mi_dsbrdf.brdf.measured import nbrdf_names
 from mi_dsbrdf.errors import MeasuredFileError, ModelError
 from mi_dsbrdf.model import samples
-from mi_dsbrdf.model.fitting import OBJECTIVE, fit_basis, fit_full
+from mi_dsbrdf.model.fitting import OBJECTIVE, FitObjective, fit_basis, fit_full
 from mi_dsbrdf.model.fpca import fpca
 from mi_dsbrdf.model.model_file import load_model
 from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration, select_gmm
@@ -119,9 +119,9 @@ def source_kind(source) -> str:
 # --- per-material work (runs in worker processes) ------------------------------------
 
 def _fit_full_job(args):
-    source, name = args
+    source, name, objective = args
     t0 = time.perf_counter()
-    f = fit_full(load_samples(source, name))
+    f = fit_full(load_samples(source, name), objective=objective)
     return (name, f.variables, f.material.chromaticity, (f.error, f.error_cosine), f.at_bounds,
             time.perf_counter() - t0)
 
@@ -152,15 +152,16 @@ def _map(fn, jobs, workers, desc, progress):
 
 # --- the build -----------------------------------------------------------------------
 
-def fit_all(source, names=None, workers=2, progress=True) -> dict:
-    """Full 3-lobe B-spline fits of every material of ``source``.
+def fit_all(source, names=None, workers=2, progress=True, objective: FitObjective = OBJECTIVE) -> dict:
+    """Full 3-lobe B-spline fits of every material of ``source`` (minimising ``objective``).
 
     Returns ``{"names", "controls" (M, 3, 2, 6), "chroma" (M, 3, 3), "error" (M,)
     and "error_cosine" (M,) (Eq. 5 on the fit's samples in the paper's and the
     cosine-weighted convention), "flags" [list of str per material], "seconds" (M,)}``.
     """
     names = source_names(source) if names is None else list(names)
-    rows = _map(_fit_full_job, [(os.fspath(source), n) for n in names], workers, "full DSBRDF fits", progress)
+    rows = _map(_fit_full_job, [(os.fspath(source), n, objective) for n in names], workers, "full DSBRDF fits",
+                progress)
     return {"names": [r[0] for r in rows], "controls": np.array([r[1] for r in rows]),
             "chroma": np.array([r[2] for r in rows]), "error": np.array([r[3][0] for r in rows]),
             "error_cosine": np.array([r[3][1] for r in rows]),
@@ -221,29 +222,36 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
 
 
 def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, fits_from=None,
-                gmm=GMM) -> dict:
+                gmm=GMM, objective: FitObjective = OBJECTIVE) -> dict:
     """The whole build, written to ``out`` (a ``.npz``). ``fits_from``: a model
     file whose stored full fits are reused instead of refitting them; ``gmm``: the
-    GMM's structure (:func:`gmm_structure`). Returns the arrays."""
+    GMM's structure (:func:`gmm_structure`); ``objective``: what the full fits
+    minimise (recorded; with ``fits_from`` the stored fits' own). Returns the arrays."""
     gmm_structure(gmm)                                        # a bad structure fails before the fits
     t0 = time.perf_counter()
     if fits_from is not None:
+        if objective != OBJECTIVE:
+            raise ModelError("a fit objective of its own needs new fits, not the ones stored in %s" % fits_from)
         a = load_model(fits_from).arrays
         if "fit_controls" not in a:
             raise ModelError("%s holds no full fits to reuse" % fits_from)
         fits = stored_fits(a)
+        fitted_by = json.loads(str(a["build_info"])).get("fit_objective") if "build_info" in a else None
     else:
-        fits = fit_all(source, workers=workers, progress=progress)
+        fits = fit_all(source, workers=workers, progress=progress, objective=objective)
+        fitted_by = dataclasses.asdict(objective)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress,
                              gmm=gmm)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
             "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm),
-            "fit_objective": dataclasses.asdict(OBJECTIVE),
+            "fit_objective": fitted_by,
             "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
             "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
                 os.path.basename(os.fspath(source)), os.path.basename(os.fspath(out)),
-                "".join(" --exclude %s" % n for n in exclude) + ("" if gmm == GMM else " --gmm %s" % gmm))}
+                "".join(" --exclude %s" % n for n in exclude) + ("" if gmm == GMM else " --gmm %s" % gmm)
+                + ("" if not objective.anchor_weight else " --fit-anchor %g --fit-anchor-lobes %s" % (
+                    objective.anchor_weight, " ".join(map(str, objective.anchor_lobes)))))}
     arrays["build_info"] = np.array(json.dumps(info))
     save_model(out, arrays)
     return arrays

@@ -74,6 +74,15 @@ class FitObjective:
     #: flat (Lambertian) floor, exp(kappa) - 1, where the other lobes keep
     #: gamma >= LOG_GAMMA_BOUNDS[0] and stay lobes.
     broad_gamma_min: float = 1e-4
+    #: Weight of a weak pull of every control value towards its lobe's anchor
+    #: (:data:`ANCHORS`), a residual ``anchor_weight * (ctrl - anchor)``. Where
+    #: the data do not see a control value (a faded lobe's gamma, a broad lobe's
+    #: gamma below ~0.01, a faded lobe's kappa) it settles at the anchor instead of
+    #: drifting to a bound or anywhere; where they do see it the pull is negligible.
+    anchor_weight: float = 0.0
+    #: The lobes the anchor holds (0 the broadest, which may instead rest flat on
+    #: ``broad_gamma_min``).
+    anchor_lobes: tuple = (0, 1, 2)
 
     def terms(self):
         """(weight, floor, cosine-weighted) of each active term."""
@@ -96,6 +105,11 @@ class FitObjective:
 #: (paper) and 0.068 (cosine), against 0.403 and 0.056 for the cosine term alone;
 #: heavier cosine weights trade the paper convention for little (6x: 0.272 / 0.066).
 OBJECTIVE = FitObjective()
+
+#: (log kappa, log gamma) each lobe's control values are pulled towards under
+#: :attr:`FitObjective.anchor_weight`: the medians over the 100 MERL materials of
+#: their unanchored fits' mean control values, rounded (lobe 0 the broadest).
+ANCHORS = ((-2.3, -0.9), (-0.8, 4.5), (0.2, 7.6))
 
 
 class _Problem:
@@ -178,14 +192,23 @@ class Fit:
     variables: np.ndarray  # psi of a basis fit; (R, 2, 6) control values of a full fit
 
 
-def _solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_iter=100):
-    """Fit ctrl = A p + b and chromaticity variables z from (p0, z0)."""
+def _solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_iter=100, anchor=0.0,
+           anchor_lobes=(0, 1, 2)):
+    """Fit ctrl = A p + b and chromaticity variables z from (p0, z0); ``smoothness``
+    weighs second differences of the control values, ``anchor`` their distance
+    to :data:`ANCHORS` (extra residuals, both linear in p)."""
     R = problem.R
     P = A.shape[1]
     identity = A.shape[0] == P and np.array_equal(A, np.eye(P))
     D2 = _second_differences(2 * R) * smoothness
-    D = D2 @ A if smoothness else None
     Db = D2 @ b if smoothness else None
+    D = D2 @ A if smoothness else None
+    if anchor:
+        target = np.repeat(np.array(ANCHORS, dtype=np.float64)[:R].reshape(-1), N_CONTROL)
+        rows = np.repeat(np.isin(np.arange(R), anchor_lobes), 2 * N_CONTROL)
+        D_a, Db_a = anchor * A[rows], anchor * (b - target)[rows]
+        D = D_a if D is None else np.vstack([D, D_a])
+        Db = Db_a if Db is None else np.concatenate([Db, Db_a])
 
     def unpack(x):
         return (A @ x[:P] + b).reshape(R, 2, N_CONTROL), x[P:].reshape(R, 2)
@@ -301,7 +324,8 @@ def fit_full(samples: Samples, name=None, smoothness=SMOOTHNESS, max_iter=80,
     lo, hi = _control_bounds(N_CONTROL, objective)
     n = 2 * N_LOBES * N_CONTROL
     ctrl, chroma, _, _, iters = _solve(problem, np.eye(n), np.zeros(n), ctrl0.reshape(-1), chroma_logits(chroma0),
-                                       lo, hi, smoothness=smoothness, max_iter=max_iter)
+                                       lo, hi, smoothness=smoothness, max_iter=max_iter,
+                                       anchor=objective.anchor_weight, anchor_lobes=objective.anchor_lobes)
     return _result(samples, ctrl, chroma, iters, name or samples.name, problem.knots)
 
 
