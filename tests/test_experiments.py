@@ -781,3 +781,16 @@ def test_leave_one_out_models_from_another_build_s_fits(tmp_path):
     assert "chrome" not in list(trial.arrays["library_names"])
     gap = np.abs(trial.arrays["mean"] - shipped.arrays["mean"]).max()
     np.testing.assert_allclose(gap, 3.0 / 99, rtol=1e-6)      # one of 99 fits moved by 3
+
+
+def test_held_out_basis_fits_summary_groups_and_orders_figures():
+    """benchmarks/held_out_basis_fits.py: medians, means and worst cases per model and group."""
+    import held_out_basis_fits as hob
+    rows = {"a": {"paper": 0.1, "cosine": 0.01, "gmm_nll": 10.0, "sigmas": 1.0},
+            "b": {"paper": 0.3, "cosine": 0.03, "gmm_nll": 90.0, "sigmas": 9.0},
+            "c": {"paper": 0.2, "cosine": 0.02, "gmm_nll": 20.0, "sigmas": 2.0}}
+    table = hob.summary({"m.npz": rows}, {"all": None, "two": ["a", "b", "missing"], "none": ["missing"]})
+    lines = table.splitlines()
+    assert len(lines) == 4                                   # header, rule, all, two ("none" is empty)
+    assert lines[2] == "| m.npz | all (3) | 0.200, 0.200 | 0.020, 0.020 | 20.0, 90.0 | 2.0, 9.0 |"
+    assert lines[3] == "| m.npz | two (2) | 0.200, 0.200 | 0.020, 0.020 | 50.0, 90.0 | 5.0, 9.0 |"
