@@ -1,8 +1,8 @@
 """How well a build's basis and GMM draw materials they never saw (offline, ~5 min a model on 2 cores).
 
 Each of the 100 MERL materials is held out of a build's stored full fits
-(:func:`mi_dsbrdf.model.build.build_from_fits`, as the natural-light benchmarks'
-leave-one-out models), fitted to its measurements in the other 99's basis
+(:func:`mi_dsbrdf.evaluation.experiment.loo_model`, the natural-light benchmarks'
+leave-one-out models, cached beside theirs), fitted to its measurements in the other 99's basis
 (:func:`mi_dsbrdf.model.fitting.fit_basis`, 10 coefficients and the lobes'
 chromaticities) and priced by the other 99's GMM. Per material:
 
@@ -37,6 +37,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
 DATA = os.path.join(os.path.dirname(ROOT), "shared", "data")
 OUT = os.path.join(ROOT, "benchmarks", "results", "held_out_basis_fits.json")
 
@@ -45,21 +46,19 @@ def held_out(args) -> dict:
     """One model file's per-material figures (runs in a worker process)."""
     from mi_dsbrdf.backend import one_blas_thread
     one_blas_thread()
-    from mi_dsbrdf.brdf.curves import CurveBasis
-    from mi_dsbrdf.model.build import build_from_fits, load_samples, stored_fits
+    from experiments import CACHE
+    from mi_dsbrdf.evaluation.experiment import loo_model
+    from mi_dsbrdf.model.build import load_samples
     from mi_dsbrdf.model.fitting import fit_basis
-    from mi_dsbrdf.model.model_file import ReflectanceModel, load_model
+    from mi_dsbrdf.model.model_file import load_model
     path, source = args
-    fits = stored_fits(load_model(path).arrays)
     rows = {}
-    for name in fits["names"]:
-        m = ReflectanceModel(build_from_fits(fits, exclude=[name], refit=False, progress=False))
-        a = m.arrays
-        f = fit_basis(load_samples(source, name), CurveBasis(a["mean"], a["bases"], a["knots"]))
+    for name in load_model(path).arrays["fit_names"].tolist():
+        m = loo_model(name, CACHE, fits_from=path)
+        f = fit_basis(load_samples(source, name), m.basis)
         psi = f.variables
-        d2 = [np.sum((psi - mu) ** 2 / np.diag(c)) for mu, c in zip(m.gmm.means, m.gmm.covariances)]
         rows[name] = {"paper": float(f.error), "cosine": float(f.error_cosine),
-                      "gmm_nll": float(m.gmm.nll(psi)), "sigmas": float(np.sqrt(min(d2)))}
+                      "gmm_nll": float(m.gmm.nll(psi)), "sigmas": float(m.gmm.mahalanobis(psi).min())}
     return rows
 
 
@@ -99,7 +98,6 @@ def main():
                 results[os.path.relpath(os.path.abspath(path), ROOT)] = rows
         with open(OUT, "w") as f:
             json.dump(results, f, indent=1, sort_keys=True)
-    sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
     from natural_light import VALIDATION_MATERIALS        # nothing is read on the report set
     print(summary(results, {"all": None, "validation": VALIDATION_MATERIALS}))
 

@@ -182,3 +182,18 @@ def test_chromaticity_prior_has_heavy_tails():
     v, gy = p._per_lobe(far)[1]
     assert np.isfinite(v) and v < float(y @ y) / (2 * BROAD ** 2) + np.log(81 * 2 * np.pi * BROAD ** 2) + 1e-9
     np.testing.assert_allclose(gy, y / BROAD ** 2, rtol=1e-3)
+
+
+def test_mahalanobis_is_each_component_s_distance_in_its_own_sigmas():
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(3, 3))
+    full = A @ A.T + 0.5 * np.eye(3)                          # a full covariance beside a diagonal one
+    gmm = GaussianMixture([0.4, 0.6], [[0.0, 0.0, 0.0], [1.0, -2.0, 0.5]], [np.diag([4.0, 1.0, 0.25]), full])
+    psi = np.array([2.0, 1.0, -0.5])
+    d = gmm.mahalanobis(psi)
+    np.testing.assert_allclose(d[0], np.sqrt(1.0 + 1.0 + 1.0), rtol=1e-12)
+    diff = psi - gmm.means[1]
+    np.testing.assert_allclose(d[1], np.sqrt(diff @ np.linalg.solve(full, diff)), rtol=1e-12)
+    # with no volume terms, the density ranks components by weight and this distance alone
+    np.testing.assert_allclose(gmm.log_density(psi, volume=0.0),
+                               np.log(np.sum(gmm.weights * np.exp(-0.5 * d ** 2))), rtol=1e-12)

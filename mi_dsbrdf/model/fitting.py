@@ -201,8 +201,8 @@ def _solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_it
     P = A.shape[1]
     identity = A.shape[0] == P and np.array_equal(A, np.eye(P))
     D2 = _second_differences(2 * R) * smoothness
-    Db = D2 @ b if smoothness else None
     D = D2 @ A if smoothness else None
+    Db = D2 @ b if smoothness else None
     if anchor:
         target = np.repeat(np.array(ANCHORS, dtype=np.float64)[:R].reshape(-1), N_CONTROL)
         rows = np.repeat(np.isin(np.arange(R), anchor_lobes), 2 * N_CONTROL)

@@ -74,13 +74,23 @@ class GaussianMixture:
     def dim(self) -> int:
         return self.means.shape[1]
 
-    def _component_logs(self, x, volume=1.0):
+    def _offsets(self, x):
+        """(M, C, k) x - mu_c and Sigma_c^-1 (x - mu_c) for x of shape (k,) or (M, k)."""
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         diff = x[:, None, :] - self.means[None]                              # (M, C, k)
-        sol = np.einsum("cij,mcj->mci", self._prec, diff)
+        return diff, np.einsum("cij,mcj->mci", self._prec, diff)
+
+    def _component_logs(self, x, volume=1.0):
+        diff, sol = self._offsets(x)
         log_w = np.log(np.maximum(self.weights, 1e-300))
         norm = log_w + float(volume) * (self._log_norm - log_w)
         return norm[None] - 0.5 * np.einsum("mci,mci->mc", diff, sol), sol
+
+    def mahalanobis(self, psi) -> np.ndarray:
+        """(C,) Mahalanobis distance of ``psi`` (k,) to each component's mean, in its
+        own standard deviations."""
+        diff, sol = self._offsets(np.asarray(psi, dtype=np.float64).reshape(1, -1))
+        return np.sqrt(np.einsum("mci,mci->mc", diff, sol)[0])
 
     def dominant_precision(self, psi, volume=1.0) -> np.ndarray:
         """(k, k) inverse covariance of the component most responsible for ``psi``:
