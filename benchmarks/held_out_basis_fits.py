@@ -15,7 +15,8 @@ The last two are in each build's own coordinates: compare them between builds
 with care (an anchored build packs the library tighter, so a fit that the data
 leave free in a direction can sit many of its sigmas away and still cost the
 image nothing). Used in the twenty-sixth session to compare the shipped build
-with builds whose fits were anchored (``build-model --fit-anchor``)::
+with builds whose fits were anchored (``build-model --fit-anchor``), and in the
+twenty-seventh with one whose unseen values were completed (``--complete-unseen``)::
 
     .venv/bin/python benchmarks/held_out_basis_fits.py mi_dsbrdf/data/model.npz \\
         benchmarks/results/natural_light/models/fit_anchor0.003.npz ...

@@ -24,6 +24,34 @@ def synthetic_fits(M=16):
             "flags": [[] for _ in range(M)]}
 
 
+def test_build_completes_unseen_values_only_when_asked_and_keeps_the_ranges(tmp_path):
+    """build_from_fits(complete=True): functional PCA sees the completed control
+    values (within each fit's ranges, moved where a range is wide), the file keeps
+    the ranges and the completed values, a leave-one-out build completes the
+    others' values again; without ranges it is a one-line ModelError."""
+    fits = synthetic_fits(20)
+    with pytest.raises(ModelError, match="ranges"):
+        build_model.build_from_fits(fits, k=4, refit=False, progress=False, complete=True)
+    lower, upper = fits["controls"] - 0.01, fits["controls"] + 0.01
+    lower[:5, 1, 1], upper[:5, 1, 1] = -20.0, 20.0              # five fits do not see lobe 1's gamma
+    fits = {**fits, "lower": lower, "upper": upper}
+    fits["controls"] = fits["controls"].copy()
+    fits["controls"][:5, 1, 1] = -1.6                           # and rest on a bound
+    plain = build_model.build_from_fits(fits, k=4, refit=False, progress=False)
+    done = build_model.build_from_fits(fits, k=4, refit=False, progress=False, complete=True)
+    assert not bool(plain["fpca_complete"]) and bool(done["fpca_complete"]) and "fpca_controls" not in plain
+    c = done["fpca_controls"]
+    assert np.all(c >= lower) and np.all(c <= upper)
+    assert np.abs(c[:5, 1, 1] - training_curves(20)[:5, 1, 1]).max() < 0.1     # back on the other curves
+    explained = lambda v: np.cumsum(v)[3] / v.sum()              # four factors again, not spread out
+    assert explained(plain["fpca_variance"]) < 0.99 < 0.9999 < explained(done["fpca_variance"])
+    np.testing.assert_array_equal(done["fit_lower"], lower)
+    build_model.save_model(tmp_path / "done.npz", done)
+    again = build_model.stored_fits(load_model(tmp_path / "done.npz").arrays)
+    loo = build_model.build_from_fits(again, k=4, exclude=["mat-07"], refit=False, progress=False, complete=True)
+    assert loo["fpca_controls"].shape[0] == 19 and bool(loo["fpca_complete"])
+
+
 def test_leave_one_out_really_excludes_the_material(tmp_path):
     fits = synthetic_fits()
     full = build_model.build_from_fits(fits, k=4, refit=False, progress=False)

@@ -151,7 +151,8 @@ def loo_model(name, cache, gmm=None, k=None, fits_from=None):
     library from the other 99 fits; the GMM of structure ``gmm``, default the
     build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
     the build's ``DEFAULT_K``; the full fits stored in the model file
-    ``fits_from``, default the shipped one), cached as
+    ``fits_from``, default the shipped one, completed where unseen if that
+    file's were, :func:`~mi_dsbrdf.model.build.build_from_fits`), cached as
     ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``, h the first 12 hex digits of that
     model file's SHA-256, so that a rebuilt model never reuses a leave-one-out
     model of the one before.
@@ -166,8 +167,10 @@ def loo_model(name, cache, gmm=None, k=None, fits_from=None):
     source = model_data.SHIPPED if fits_from is None else fits_from
     path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, model_file_hash(source), tag))
     if not os.path.exists(path):
-        fits = stored_fits(model_data.load_model(source).arrays)
-        save_model(path, build_from_fits(fits, k=k, exclude=[name], refit=False, progress=False, gmm=gmm))  # atomic
+        arrays = model_data.load_model(source).arrays
+        complete = bool(arrays["fpca_complete"]) if "fpca_complete" in arrays else False
+        save_model(path, build_from_fits(stored_fits(arrays), k=k, exclude=[name], refit=False, progress=False,
+                                         gmm=gmm, complete=complete))  # atomic
     return model_data.load_model(path)
 
 

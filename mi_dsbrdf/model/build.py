@@ -36,8 +36,8 @@ from mi_dsbrdf.brdf.curves import CurveBasis
 from mi_dsbrdf.brdf.measured import nbrdf_names
 from mi_dsbrdf.errors import MeasuredFileError, ModelError
 from mi_dsbrdf.model import samples
-from mi_dsbrdf.model.fitting import OBJECTIVE, FitObjective, fit_basis, fit_full
-from mi_dsbrdf.model.fpca import fpca
+from mi_dsbrdf.model.fitting import OBJECTIVE, FitObjective, fit_basis, fit_full, unseen_ranges
+from mi_dsbrdf.model.fpca import complete_unseen, fpca
 from mi_dsbrdf.model.model_file import load_model
 from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration, select_gmm
 
@@ -132,6 +132,11 @@ def _fit_basis_job(args):
     return name, f.variables, f.material.chromaticity, (f.error, f.error_cosine)
 
 
+def _unseen_ranges_job(args):
+    source, name, ctrl, chroma, objective = args
+    return unseen_ranges(load_samples(source, name), ctrl, chroma, objective=objective)
+
+
 def _map(fn, jobs, workers, desc, progress):
     """Run ``fn`` over ``jobs`` in ``workers`` processes, in job order, with a progress bar."""
     bar = tqdm(total=len(jobs), desc=desc, disable=not progress, unit="mat", file=sys.stderr)
@@ -168,8 +173,17 @@ def fit_all(source, names=None, workers=2, progress=True, objective: FitObjectiv
             "flags": [list(r[4]) for r in rows], "seconds": np.array([r[5] for r in rows])}
 
 
+def fit_unseen_ranges(source, fits: dict, workers=2, progress=True, objective: FitObjective = OBJECTIVE) -> dict:
+    """``fits`` (:func:`fit_all`) with the range of each control value the
+    measurements barely see (:func:`~mi_dsbrdf.model.fitting.unseen_ranges`):
+    a copy with ``"lower"`` and ``"upper"`` (M, 3, 2, 6) added."""
+    jobs = [(os.fspath(source), n, c, x, objective) for n, c, x in zip(fits["names"], fits["controls"], fits["chroma"])]
+    rows = _map(_unseen_ranges_job, jobs, workers, "unseen ranges", progress)
+    return {**fits, "lower": np.array([r[0] for r in rows]), "upper": np.array([r[1] for r in rows])}
+
+
 def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2, progress=True,
-                    refit=True, gmm=GMM) -> dict:
+                    refit=True, gmm=GMM, complete=False) -> dict:
     """Bases, library and priors from full fits, without the ``exclude``d materials.
 
     With ``refit`` (and a ``source``), every kept material is refitted in the
@@ -180,7 +194,10 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     so that a leave-one-out model's priors are the build's: priors fitted to the
     refits instead recovered held-out materials worse from images (natural-light
     validation, BRDF 0.54x the mean material against 0.48x; README, *The
-    reflectance model*). Returns the arrays of a model file.
+    reflectance model*). With ``complete`` (``fits`` must hold the ranges of
+    :func:`fit_unseen_ranges`), functional PCA sees the control values completed
+    where the measurements do not see them (:func:`~mi_dsbrdf.model.fpca.complete_unseen`),
+    not the values the fits left there. Returns the arrays of a model file.
     """
     names = list(fits["names"])
     exclude = list(exclude)
@@ -191,7 +208,15 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     if len(keep) < k + 2:
         raise ModelError("%d materials are too few for %d bases" % (len(keep), k))
     kept = [names[i] for i in keep]
-    pca = fpca(fits["controls"][keep])
+    controls, extra = fits["controls"][keep], {}
+    if "lower" in fits:
+        extra = {"fit_lower": fits["lower"], "fit_upper": fits["upper"]}
+    if complete:
+        if "lower" not in fits:
+            raise ModelError("completing unseen control values needs their ranges (build with the measurements)")
+        controls, iterations = complete_unseen(controls, fits["lower"][keep], fits["upper"][keep], k)
+        extra.update(fpca_controls=controls, fpca_completion_iterations=np.array(iterations))
+    pca = fpca(controls)
     basis = pca.basis(k)
     scores, fit_chroma = pca.scores[:, :k], fits["chroma"][keep]     # the priors' data, refit or not
     if refit:
@@ -218,15 +243,18 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         **fit_gmm_prior(scores, gmm),
         "hue_kappa": np.array(kappa_h), "hue_pairs": np.array(n_pairs),
         "excluded": np.array(exclude, dtype=str),
+        "fpca_complete": np.array(bool(complete)), **extra,
     }
 
 
 def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, fits_from=None,
-                gmm=GMM, objective: FitObjective = OBJECTIVE) -> dict:
+                gmm=GMM, objective: FitObjective = OBJECTIVE, complete=False) -> dict:
     """The whole build, written to ``out`` (a ``.npz``). ``fits_from``: a model
     file whose stored full fits are reused instead of refitting them; ``gmm``: the
     GMM's structure (:func:`gmm_structure`); ``objective``: what the full fits
-    minimise (recorded; with ``fits_from`` the stored fits' own). Returns the arrays."""
+    minimise (recorded; with ``fits_from`` the stored fits' own); ``complete``:
+    functional PCA on the control values completed where the measurements do
+    not see them (:func:`build_from_fits`). Returns the arrays."""
     gmm_structure(gmm)                                        # a bad structure fails before the fits
     t0 = time.perf_counter()
     if fits_from is not None:
@@ -240,18 +268,22 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     else:
         fits = fit_all(source, workers=workers, progress=progress, objective=objective)
         fitted_by = dataclasses.asdict(objective)
+    if complete and "lower" not in fits:
+        fits = fit_unseen_ranges(source, fits, workers=workers, progress=progress,
+                                 objective=FitObjective(**fitted_by) if fitted_by else OBJECTIVE)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress,
-                             gmm=gmm)
+                             gmm=gmm, complete=complete)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
             "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm),
-            "fit_objective": fitted_by,
+            "fit_objective": fitted_by, "complete_unseen": bool(complete),
             "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
             "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
                 os.path.basename(os.fspath(source)), os.path.basename(os.fspath(out)),
                 "".join(" --exclude %s" % n for n in exclude) + ("" if gmm == GMM else " --gmm %s" % gmm)
                 + ("" if not objective.anchor_weight else " --fit-anchor %g --fit-anchor-lobes %s" % (
-                    objective.anchor_weight, " ".join(map(str, objective.anchor_lobes)))))}
+                    objective.anchor_weight, " ".join(map(str, objective.anchor_lobes))))
+                + (" --complete-unseen" if complete else ""))}
     arrays["build_info"] = np.array(json.dumps(info))
     save_model(out, arrays)
     return arrays
@@ -261,9 +293,12 @@ def stored_fits(arrays) -> dict:
     """The full fits a model file keeps (``fit_*`` arrays), in the form
     :func:`fit_all` returns and :func:`build_from_fits` takes."""
     a = arrays
-    return {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
+    fits = {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
             "error": a["fit_error"], "error_cosine": a["fit_error_cosine"],
             "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
+    if "fit_lower" in a:
+        fits.update(lower=a["fit_lower"], upper=a["fit_upper"])
+    return fits
 
 
 def save_model(path, arrays) -> None:
