@@ -36,6 +36,7 @@ image.
     .venv/bin/python benchmarks/truth_posterior.py              # all 36 validation cases, ~15 min on 2 cores
     .venv/bin/python benchmarks/truth_posterior.py --descend    # both descents from each stored case's truth, ~8 min
     .venv/bin/python benchmarks/truth_posterior.py --report     # -> docs/truth_posterior.md
+    .venv/bin/python benchmarks/truth_posterior.py --fits-from MODEL --materials ...   # another build's models
 
 Validation materials and probes only. Each case is added to
 benchmarks/results/truth_posterior.json as it ends; a case already there is
@@ -44,6 +45,7 @@ not run again (delete the file to start over).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import sys
@@ -60,12 +62,14 @@ DOC = os.path.join(DOCS, "truth_posterior.md")
 REFINE_ITERS = 300
 
 
-def validation_case(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> tuple:
+def validation_case(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64, fits_from=None) -> tuple:
     """One case as ``natural_light.py`` makes it: (leave-one-out model, the measured
     material's MERL samples, the probe at twice ``map_size``, the image (res, res, 3)
     rendered from its texel centres, the ``dsbrdf`` view at ``map_size``, the pixels
     the app infers from (:func:`~mi_dsbrdf.inference.pixels.usable_pixels`; every
-    script that takes its case from here since the twenty-first session))."""
+    script that takes its case from here since the twenty-first session)).
+    ``fits_from``: the leave-one-out model from that model file's full fits
+    (:func:`~mi_dsbrdf.evaluation.experiment.loo_model`), default the shipped one's."""
     import drjit as dr
     from mi_dsbrdf.app.io import read_image
     from mi_dsbrdf.brdf.measured import MeasuredBRDF
@@ -74,7 +78,7 @@ def validation_case(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), 
     from mi_dsbrdf.model.samples import samples_from_table
     dr.set_thread_count(1)
     nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
-    model = ex.loo_model(material, cache)
+    model = ex.loo_model(material, cache, fits_from=fits_from)
     samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, material))
     H, W = map_size
     truth = ex.downsample(read_image(os.path.join(data, "envmaps", probe)), 2 * H, 2 * W)
@@ -84,7 +88,7 @@ def validation_case(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), 
     return model, samples, truth, img, ts, usable_pixels(ts.mask, img)
 
 
-def case_posterior(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> tuple:
+def case_posterior(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64, fits_from=None) -> tuple:
     """One validation case as the points are scored: (the posterior of the colour
     pass, which the app's answer minimises last: the app's pixels, each texel lit
     from ``Config.texel_samples`` squared directions; the leave-one-out model, the
@@ -93,7 +97,7 @@ def case_posterior(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), r
     from mi_dsbrdf.config import Config
     from mi_dsbrdf.evaluation import experiment as ex
     from mi_dsbrdf.inference.objective import Posterior
-    model, samples, truth, img, ts, mask = validation_case(material, probe, data, cache, map_size, res)
+    model, samples, truth, img, ts, mask = validation_case(material, probe, data, cache, map_size, res, fits_from)
     cfg = Config(map_size=tuple(map_size))
     # scored on the colour pass's forward model since the twenty-first session (texel centres before, where
     # a lobe sharper than the texel spacing is aliased and the descent's end scored above its start)
@@ -144,11 +148,12 @@ def truth_point(post, model, samples, small, seen) -> tuple:
     return psi, logits, x, T
 
 
-def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
+def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64, fits_from=None) -> dict:
     """Recover one case and score both points (see the module doc)."""
     from mi_dsbrdf.inference import envmap
     from mi_dsbrdf.evaluation.metrics import highlight_ratio
-    post, model, samples, small, seen, img, ts, mask = case_posterior(material, probe, data, cache, map_size, res)
+    post, model, samples, small, seen, img, ts, mask = case_posterior(material, probe, data, cache, map_size, res,
+                                                                      fits_from)
     rec = envmap.recover_envmap(ts, img, mask, model, post.cfg)
     seen = rec.seen                         # the recovery's seen texels (those of the view: every pixel is used)
     psi, logits, log_map = recovered_point(rec)
@@ -207,10 +212,10 @@ def save_rows(rows, path) -> None:
     os.replace(tmp, path)
 
 
-def report(rows) -> str:
+def report(rows, source=OUT) -> str:
     md = ["# Does the posterior prefer the true material?", "",
           "Generated by `python benchmarks/truth_posterior.py --report` from "
-          "`benchmarks/results/truth_posterior.json` (see the script's doc). Validation cases only. Per case: the "
+          "`%s` (see the script's doc). Validation cases only. Per case: the " % os.path.relpath(source, ROOT) +
           "negative log posterior's terms at the recovered answer and at the measured material's best fit in the "
           "leave-one-out basis under the true map (refined for that material by %d L-BFGS iterations); "
           "Eq. 20 (paper), the highlight ratio (measured in brackets) and the map's log(1 + L) error." % REFINE_ITERS,
@@ -303,9 +308,17 @@ def main(argv=None):
     ap.add_argument("--probes", nargs="*", default=VALIDATION_PROBES)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--report", action="store_true", help="write docs/truth_posterior.md from the results")
+    ap.add_argument("--fits-from", default=None, metavar="MODEL",
+                    help="leave-one-out models from this model file's fits (build-model --complete-unseen, ...); "
+                         "results in benchmarks/results/truth_posterior-trial-<file name>.json, no report written")
     ap.add_argument("--descend", action="store_true",
                     help="add to each stored case where one colour pass goes from the truth's point (descend)")
     args = ap.parse_args(argv)
+    if args.fits_from is not None:
+        if args.report or args.descend:
+            sys.exit("--fits-from runs and prints its cases; --report and --descend are the shipped model's")
+        if not os.path.isfile(args.fits_from):
+            sys.exit("--fits-from: no model file %s" % args.fits_from)
     if args.report:
         with open(OUT) as f:
             text = report(json.load(f))
@@ -317,14 +330,18 @@ def main(argv=None):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
     if args.descend:
         return add_descents(args)
-    rows = []
-    for i, n, r in run_saved(run, OUT, [(m, p) for p in args.probes for m in args.materials], args.workers, rows):
+    rows, out, fn = [], OUT, run
+    if args.fits_from is not None:
+        out = os.path.join(os.path.dirname(OUT), "truth_posterior-trial-%s.json"
+                           % os.path.splitext(os.path.basename(args.fits_from))[0])
+        fn = functools.partial(run, fits_from=os.path.abspath(args.fits_from))
+    for i, n, r in run_saved(fn, out, [(m, p) for p in args.probes for m in args.materials], args.workers, rows):
         a, b = r["recovered"], r["truth_fit"]
         print("[%d/%d] %-24s %-28s -log posterior recovered %8.0f truth fit %8.0f | likelihood %7.0f %7.0f"
               " | Eq. 20 %.3f %.3f" % (i, n, r["material"], os.path.basename(r["probe"]),
                                       a["neg_log_posterior"], b["neg_log_posterior"], a["likelihood"],
                                       b["likelihood"], a["brdf_eq20_paper"], b["brdf_eq20_paper"]), flush=True)
-    print(report(rows))
+    print(report(rows, out))
 
 
 if __name__ == "__main__":
