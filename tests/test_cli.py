@@ -132,3 +132,13 @@ def test_build_model_names_a_bad_fit_anchor(tmp_path, capsys):
         err = capsys.readouterr().err
         assert "--fit-anchor" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert not out.exists()
+
+
+def test_build_model_names_a_bad_curve_to_complete(tmp_path, capsys):
+    """--complete-unseen LOBE:CURVE: an unknown curve is a one-line error before any fit."""
+    out = tmp_path / "m.npz"
+    for bad in (["3:gamma"], ["0:gamma", "1:sigma"]):
+        assert main(["build-model", "--merl", str(tmp_path), "--out", str(out), "--complete-unseen"] + bad) == 1
+        err = capsys.readouterr().err
+        assert "lobe:curve" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists()

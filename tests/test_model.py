@@ -52,6 +52,24 @@ def test_build_completes_unseen_values_only_when_asked_and_keeps_the_ranges(tmp_
     assert loo["fpca_controls"].shape[0] == 19 and bool(loo["fpca_complete"])
 
 
+def test_restricted_ranges_complete_only_the_named_curves():
+    """restrict_ranges: the ranges stay on the named curves and shrink to the value elsewhere,
+    so completion moves only the named curves' values; an unknown name is a ModelError."""
+    fits = synthetic_fits(20)
+    lower, upper = fits["controls"] - 5.0, fits["controls"] + 5.0
+    only = build_model.restrict_ranges({**fits, "lower": lower, "upper": upper}, ["0:gamma", "2:kappa"])
+    named = np.zeros((3, 2), dtype=bool)
+    named[0, 1] = named[2, 0] = True
+    np.testing.assert_array_equal(only["lower"][:, named], lower[:, named])
+    np.testing.assert_array_equal(only["upper"][:, ~named], fits["controls"][:, ~named])
+    done = build_model.build_from_fits(only, k=2, refit=False, progress=False, complete=True)
+    moved = np.abs(done["fpca_controls"] - fits["controls"]).max(axis=(0, 3))
+    assert np.all(moved[~named] == 0) and np.all(moved[named] > 0)
+    for bad in (["0:sigma"], []):
+        with pytest.raises(ModelError, match="lobe:curve"):
+            build_model.restrict_ranges({**fits, "lower": lower, "upper": upper}, bad)
+
+
 def test_leave_one_out_really_excludes_the_material(tmp_path):
     fits = synthetic_fits()
     full = build_model.build_from_fits(fits, k=4, refit=False, progress=False)

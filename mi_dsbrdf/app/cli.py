@@ -74,7 +74,8 @@ def cmd_build_model(args):
     objective = dataclasses.replace(OBJECTIVE, anchor_weight=args.fit_anchor,
                                     anchor_lobes=tuple(sorted(set(args.fit_anchor_lobes))))
     a = build_model(args.merl, out, k=args.k, exclude=args.exclude, workers=args.workers,
-                    fits_from=args.fits_from, gmm=args.gmm, objective=objective, complete=args.complete_unseen)
+                    fits_from=args.fits_from, gmm=args.gmm, objective=objective,
+                    complete=False if args.complete_unseen is None else (args.complete_unseen or True))
     info = json.loads(str(a["build_info"]))
     print("model with %d bases (%.1f%% of the curve variance), %d library materials, GMM of %d %s components, "
           "hue kappa_h %.3g: %s (%.0f s)" % (
@@ -190,9 +191,10 @@ def main(argv=None):
                         "(FitObjective.anchor_weight; default 0, off; the twenty-sixth session tried 0.003)")
     p.add_argument("--fit-anchor-lobes", type=int, nargs="+", default=[0, 1, 2], metavar="LOBE",
                    help="the lobes --fit-anchor holds (default 0 1 2)")
-    p.add_argument("--complete-unseen", action="store_true",
+    p.add_argument("--complete-unseen", nargs="*", default=None, metavar="LOBE:CURVE",
                    help="functional PCA on the fits' control values completed where the measurements do not "
-                        "see them (a faded lobe's gamma, a flat lobe's gamma), not where the fits left them")
+                        "see them (a faded lobe's gamma, a flat lobe's gamma), not where the fits left them; "
+                        "on every curve, or only on those named, e.g. 0:gamma (lobe 0 the broadest)")
     p.add_argument("--force", action="store_true", help="replace an existing model file")
     p.set_defaults(func=cmd_build_model)
 

@@ -173,6 +173,33 @@ def fit_all(source, names=None, workers=2, progress=True, objective: FitObjectiv
             "flags": [list(r[4]) for r in rows], "seconds": np.array([r[5] for r in rows])}
 
 
+#: The curves ``build-model --complete-unseen`` may name: (lobe, curve) by "lobe:kappa|gamma".
+CURVES = {"%d:%s" % (r, c): (r, i) for r in range(3) for i, c in enumerate(("kappa", "gamma"))}
+
+
+def curve_mask(curves) -> np.ndarray:
+    """(3, 2) bool: the (lobe, curve) pairs named by ``curves`` (:data:`CURVES`); ModelError otherwise."""
+    curves = list(curves)
+    bad = [c for c in curves if c not in CURVES]
+    if bad or not curves:
+        raise ModelError("curves to complete: give lobe:curve among %s, got %s"
+                         % (", ".join(CURVES), " ".join(curves) or "none"))
+    mask = np.zeros((3, 2), dtype=bool)
+    for c in curves:
+        mask[CURVES[c]] = True
+    return mask
+
+
+def restrict_ranges(fits: dict, curves) -> dict:
+    """``fits`` with ranges (:func:`fit_unseen_ranges`) kept only on ``curves``
+    (names of :data:`CURVES`, e.g. ``["0:gamma"]``): every other control value's
+    range becomes the value itself, so completion leaves it where the fit put it.
+    A copy; ModelError on an unknown name."""
+    keep = curve_mask(curves)[None, :, :, None]
+    return {**fits, "lower": np.where(keep, fits["lower"], fits["controls"]),
+            "upper": np.where(keep, fits["upper"], fits["controls"])}
+
+
 def fit_unseen_ranges(source, fits: dict, workers=2, progress=True, objective: FitObjective = OBJECTIVE) -> dict:
     """``fits`` (:func:`fit_all`) with the range of each control value the
     measurements barely see (:func:`~mi_dsbrdf.model.fitting.unseen_ranges`):
@@ -254,8 +281,13 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     GMM's structure (:func:`gmm_structure`); ``objective``: what the full fits
     minimise (recorded; with ``fits_from`` the stored fits' own); ``complete``:
     functional PCA on the control values completed where the measurements do
-    not see them (:func:`build_from_fits`). Returns the arrays."""
+    not see them (:func:`build_from_fits`): True on every curve, or a list of
+    curves (:func:`restrict_ranges`; the file keeps the restricted ranges, so
+    leave-one-out builds from it complete the same values). Returns the arrays."""
     gmm_structure(gmm)                                        # a bad structure fails before the fits
+    curves = None if isinstance(complete, bool) else list(complete)
+    if curves is not None:
+        curve_mask(curves)                                    # a bad name fails before the fits
     t0 = time.perf_counter()
     if fits_from is not None:
         if objective != OBJECTIVE:
@@ -268,14 +300,16 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     else:
         fits = fit_all(source, workers=workers, progress=progress, objective=objective)
         fitted_by = dataclasses.asdict(objective)
-    if complete and "lower" not in fits:
+    if complete is not False and "lower" not in fits:
         fits = fit_unseen_ranges(source, fits, workers=workers, progress=progress,
                                  objective=FitObjective(**fitted_by) if fitted_by else OBJECTIVE)
+    if curves is not None:
+        fits = restrict_ranges(fits, curves)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress,
-                             gmm=gmm, complete=complete)
+                             gmm=gmm, complete=complete is not False)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
             "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm),
-            "fit_objective": fitted_by, "complete_unseen": bool(complete),
+            "fit_objective": fitted_by, "complete_unseen": complete if curves is None else curves,
             "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
             "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
@@ -283,7 +317,7 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
                 "".join(" --exclude %s" % n for n in exclude) + ("" if gmm == GMM else " --gmm %s" % gmm)
                 + ("" if not objective.anchor_weight else " --fit-anchor %g --fit-anchor-lobes %s" % (
                     objective.anchor_weight, " ".join(map(str, objective.anchor_lobes))))
-                + (" --complete-unseen" if complete else ""))}
+                + ("" if complete is False else " --complete-unseen" + "".join(" " + c for c in curves or ())))}
     arrays["build_info"] = np.array(json.dumps(info))
     save_model(out, arrays)
     return arrays
