@@ -65,6 +65,12 @@ def test_restricted_ranges_complete_only_the_named_curves():
     done = build_model.build_from_fits(only, k=2, refit=False, progress=False, complete=True)
     moved = np.abs(done["fpca_controls"] - fits["controls"]).max(axis=(0, 3))
     assert np.all(moved[~named] == 0) and np.all(moved[named] > 0)
+    # the same from the whole ranges and the curves' names; the file keeps the ranges whole
+    named_build = build_model.build_from_fits({**fits, "lower": lower, "upper": upper}, k=2, refit=False,
+                                              progress=False, complete=["0:gamma", "2:kappa"])
+    np.testing.assert_array_equal(named_build["fpca_controls"], done["fpca_controls"])
+    np.testing.assert_array_equal(named_build["fit_lower"], lower)
+    assert list(named_build["fpca_complete_curves"]) == ["0:gamma", "2:kappa"]
     for bad in (["0:sigma"], []):
         with pytest.raises(ModelError, match="lobe:curve"):
             build_model.restrict_ranges({**fits, "lower": lower, "upper": upper}, bad)

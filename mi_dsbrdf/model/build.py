@@ -221,10 +221,12 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     so that a leave-one-out model's priors are the build's: priors fitted to the
     refits instead recovered held-out materials worse from images (natural-light
     validation, BRDF 0.54x the mean material against 0.48x; README, *The
-    reflectance model*). With ``complete`` (``fits`` must hold the ranges of
+    reflectance model*). With ``complete`` (True, or a list of curves,
+    :func:`restrict_ranges`; ``fits`` must hold the ranges of
     :func:`fit_unseen_ranges`), functional PCA sees the control values completed
     where the measurements do not see them (:func:`~mi_dsbrdf.model.fpca.complete_unseen`),
-    not the values the fits left there. Returns the arrays of a model file.
+    not the values the fits left there; the file keeps the ranges whole and the
+    curves completed (``fpca_complete_curves``). Returns the arrays of a model file.
     """
     names = list(fits["names"])
     exclude = list(exclude)
@@ -238,11 +240,14 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     controls, extra = fits["controls"][keep], {}
     if "lower" in fits:
         extra = {"fit_lower": fits["lower"], "fit_upper": fits["upper"]}
-    if complete:
+    if complete is not False:
         if "lower" not in fits:
             raise ModelError("completing unseen control values needs their ranges (build with the measurements)")
-        controls, iterations = complete_unseen(controls, fits["lower"][keep], fits["upper"][keep], k)
-        extra.update(fpca_controls=controls, fpca_completion_iterations=np.array(iterations))
+        curves = list(CURVES) if complete is True else list(complete)
+        ranges = restrict_ranges(fits, curves)
+        controls, iterations = complete_unseen(controls, ranges["lower"][keep], ranges["upper"][keep], k)
+        extra.update(fpca_controls=controls, fpca_completion_iterations=np.array(iterations),
+                     fpca_complete_curves=np.array(curves))
     pca = fpca(controls)
     basis = pca.basis(k)
     scores, fit_chroma = pca.scores[:, :k], fits["chroma"][keep]     # the priors' data, refit or not
@@ -270,7 +275,7 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         **fit_gmm_prior(scores, gmm),
         "hue_kappa": np.array(kappa_h), "hue_pairs": np.array(n_pairs),
         "excluded": np.array(exclude, dtype=str),
-        "fpca_complete": np.array(bool(complete)), **extra,
+        "fpca_complete": np.array(complete is not False), **extra,
     }
 
 
@@ -282,8 +287,8 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     minimise (recorded; with ``fits_from`` the stored fits' own); ``complete``:
     functional PCA on the control values completed where the measurements do
     not see them (:func:`build_from_fits`): True on every curve, or a list of
-    curves (:func:`restrict_ranges`; the file keeps the restricted ranges, so
-    leave-one-out builds from it complete the same values). Returns the arrays."""
+    curves (:func:`restrict_ranges`; the file records them, so leave-one-out
+    builds from it complete the same values). Returns the arrays."""
     gmm_structure(gmm)                                        # a bad structure fails before the fits
     curves = None if isinstance(complete, bool) else list(complete)
     if curves is not None:
@@ -303,10 +308,8 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     if complete is not False and "lower" not in fits:
         fits = fit_unseen_ranges(source, fits, workers=workers, progress=progress,
                                  objective=FitObjective(**fitted_by) if fitted_by else OBJECTIVE)
-    if curves is not None:
-        fits = restrict_ranges(fits, curves)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress,
-                             gmm=gmm, complete=complete is not False)
+                             gmm=gmm, complete=complete if curves is None else curves)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
             "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm),
             "fit_objective": fitted_by, "complete_unseen": complete if curves is None else curves,

@@ -30,7 +30,8 @@ the fit samples in the paper's and the cosine-weighted convention ``fit_error``,
 ``fit_error_cosine``, ``library_error``, ``library_error_cosine``, ``excluded``,
 ``fpca_complete`` (whether functional PCA saw the fits' control values completed
 where the measurements do not see them), with it ``fit_lower``/``fit_upper`` (their
-ranges) and ``fpca_controls`` (the completed values), and ``build_info`` (JSON,
+ranges), ``fpca_complete_curves`` (the curves completed) and ``fpca_controls`` (the
+completed values), and ``build_info`` (JSON,
 with the fit objective).
 """
 from __future__ import annotations
