@@ -39,7 +39,8 @@ def test_build_completes_unseen_values_only_when_asked_and_keeps_the_ranges(tmp_
     fits["controls"][:5, 1, 1] = -1.6                           # and rest on a bound
     plain = build_model.build_from_fits(fits, k=4, refit=False, progress=False)
     done = build_model.build_from_fits(fits, k=4, refit=False, progress=False, complete=True)
-    assert not bool(plain["fpca_complete"]) and bool(done["fpca_complete"]) and "fpca_controls" not in plain
+    assert "fpca_complete_curves" not in plain and "fpca_controls" not in plain
+    assert list(done["fpca_complete_curves"]) == list(build_model.CURVES)        # every curve
     c = done["fpca_controls"]
     assert np.all(c >= lower) and np.all(c <= upper)
     assert np.abs(c[:5, 1, 1] - training_curves(20)[:5, 1, 1]).max() < 0.1     # back on the other curves
@@ -49,7 +50,7 @@ def test_build_completes_unseen_values_only_when_asked_and_keeps_the_ranges(tmp_
     build_model.save_model(tmp_path / "done.npz", done)
     again = build_model.stored_fits(load_model(tmp_path / "done.npz").arrays)
     loo = build_model.build_from_fits(again, k=4, exclude=["mat-07"], refit=False, progress=False, complete=True)
-    assert loo["fpca_controls"].shape[0] == 19 and bool(loo["fpca_complete"])
+    assert loo["fpca_controls"].shape[0] == 19 and list(loo["fpca_complete_curves"]) == list(build_model.CURVES)
 
 
 def test_restricted_ranges_complete_only_the_named_curves():
@@ -74,6 +75,26 @@ def test_restricted_ranges_complete_only_the_named_curves():
     for bad in (["0:sigma"], []):
         with pytest.raises(ModelError, match="lobe:curve"):
             build_model.restrict_ranges({**fits, "lower": lower, "upper": upper}, bad)
+
+
+def test_leave_one_out_model_completes_the_curves_its_source_file_completed(tmp_path):
+    """experiment.loo_model(fits_from=): a build that completed some curves hands them on,
+    a build that completed none hands on none."""
+    from mi_dsbrdf.evaluation import experiment
+    fits = synthetic_fits(20)
+    fits = {**fits, "lower": fits["controls"] - 5.0, "upper": fits["controls"] + 5.0}
+    for curves in (["0:gamma"], False):
+        path = tmp_path / ("m-%s.npz" % bool(curves))
+        build_model.save_model(path, build_model.build_from_fits(fits, k=4, refit=False, progress=False,
+                                                                 complete=curves))
+        loo = experiment.loo_model("mat-03", str(tmp_path / "cache"), k=4, fits_from=str(path)).arrays
+        if curves:
+            assert list(loo["fpca_complete_curves"]) == curves
+            kept = np.delete(fits["controls"], 3, axis=0)
+            moved = np.abs(loo["fpca_controls"] - kept).max(axis=(0, 3))
+            assert moved[0, 1] > 0 and moved.sum() == moved[0, 1]
+        else:
+            assert "fpca_complete_curves" not in loo and "fpca_controls" not in loo
 
 
 def test_leave_one_out_really_excludes_the_material(tmp_path):

@@ -168,9 +168,8 @@ def loo_model(name, cache, gmm=None, k=None, fits_from=None):
     path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, model_file_hash(source), tag))
     if not os.path.exists(path):
         arrays = model_data.load_model(source).arrays
-        complete = bool(arrays["fpca_complete"]) if "fpca_complete" in arrays else False
-        if complete and "fpca_complete_curves" in arrays:             # the curves that build completed
-            complete = [str(c) for c in arrays["fpca_complete_curves"]]
+        # the curves that build completed where unseen, if any
+        complete = [str(c) for c in arrays["fpca_complete_curves"]] if "fpca_complete_curves" in arrays else False
         save_model(path, build_from_fits(stored_fits(arrays), k=k, exclude=[name], refit=False, progress=False,
                                          gmm=gmm, complete=complete))  # atomic
     return model_data.load_model(path)

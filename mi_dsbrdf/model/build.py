@@ -275,7 +275,7 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         **fit_gmm_prior(scores, gmm),
         "hue_kappa": np.array(kappa_h), "hue_pairs": np.array(n_pairs),
         "excluded": np.array(exclude, dtype=str),
-        "fpca_complete": np.array(complete is not False), **extra,
+        **extra,
     }
 
 
