@@ -15,6 +15,7 @@ principal direction v maps back to control values as L^{-T} v.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -22,8 +23,14 @@ from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, CurveBasis, check_kn
 
 
 def gram_matrix(knots=DEFAULT_KNOTS) -> np.ndarray:
-    """(6, 6) float64 Gram matrix of the spline basis functions over [0, pi/2]."""
-    t = check_knots(knots)
+    """(6, 6) float64 Gram matrix of the spline basis functions over [0, pi/2]
+    (a new array; computed once per knot vector: :func:`complete_unseen` runs
+    functional PCA thousands of times)."""
+    return _gram_matrix(check_knots(knots)).copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _gram_matrix(t: tuple) -> np.ndarray:
     x, w = np.polynomial.legendre.leggauss(4)          # exact to degree 7
     G = np.zeros((N_CONTROL, N_CONTROL))
     for a, b in zip(t, t[1:]):
