@@ -116,7 +116,7 @@ def complete_unseen(controls, lower, upper, k, max_iter=3000, tol=1e-4):
     projections between the rank-k reconstruction of :func:`fpca` and the
     ranges (a clip), until no value moves by more than ``tol`` or after
     ``max_iter`` rounds (they converge slowly: the 100 MERL fits still move by
-    about 1e-3 after 3000 rounds, a few seconds).
+    about 1e-3 after 3000 rounds, about a second).
 
     Parameters
     ----------
