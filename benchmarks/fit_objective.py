@@ -1,7 +1,7 @@
 """Which fit objective keeps both halves of a BRDF (issue 13): full 3-lobe fits of
 validation materials under several objectives, scored in both conventions.
 
-Each option is a :class:`~mi_dsbrdf.model.fitting.FitObjective`: a paper-convention
+Each option is a :class:`~mi_dsbrdf.model.fit_problem.FitObjective`: a paper-convention
 term log(floor + f) (weight, floor), a cosine term log(offset + f cos theta_i)
 (weight, offset), and the lower bound of the broadest lobe's gamma (a small one
 lets it be a flat, Lambertian floor). Errors are Eq. 5 on the fit's own samples
@@ -48,10 +48,10 @@ OPTIONS = {
 
 def run(job):
     source, name, option = job
-    from mi_dsbrdf.model import build, fitting
+    from mi_dsbrdf.model import build, fit_problem, fitting
     s = build.load_samples(source, name)
     t0 = time.perf_counter()
-    f = fitting.fit_full(s, objective=fitting.FitObjective(**OPTIONS[option]))
+    f = fitting.fit_full(s, objective=fit_problem.FitObjective(**OPTIONS[option]))
     return option, name, {"paper": f.error, "cosine": f.error_cosine, "seconds": time.perf_counter() - t0,
                           "flags": f.at_bounds}
 

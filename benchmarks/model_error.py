@@ -189,7 +189,7 @@ def write_report(rows, names, med, library=None):
                                     np.median(library["library"]["cosine"])), ""]
     gain = sum(rows[n]["lambert_ct3"]["paper"] < 0.9 * rows[n]["lambert_ct1"]["paper"] for n in names)
     below = sum(rows[n]["dsbrdf_10"]["paper"] < rows[n]["dsbrdf_full"]["paper"] for n in names)
-    lines += ["Caveats. All models are fitted with one objective (`mi_dsbrdf.model.fitting.OBJECTIVE`: a "
+    lines += ["Caveats. All models are fitted with one objective (`mi_dsbrdf.model.fit_problem.OBJECTIVE`: a "
               "paper-convention term plus a cosine-weighted one). The Cook-Torrance models are fitted by "
               "trust-region least squares on a coarse slice (every 6th theta_d, every 30th phi_d), from 3 starts "
               "(1 lobe) or 2 starts (3 lobes, one of them the 1-lobe fit); in the paper's convention the extra "

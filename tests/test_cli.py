@@ -142,3 +142,40 @@ def test_build_model_names_a_bad_curve_to_complete(tmp_path, capsys):
         err = capsys.readouterr().err
         assert "lobe:curve" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert not out.exists()
+
+
+def test_a_builds_recorded_command_repeats_the_build(tmp_path, monkeypatch):
+    """build_info's command, run, asks build_model for the same build: every
+    non-default option is in it (--fits-from, --k and --gmm were once left out)."""
+    import dataclasses
+    import shlex
+
+    import pytest
+
+    from mi_dsbrdf.app import cli
+    from mi_dsbrdf.model.build import GMM, build_command
+    from mi_dsbrdf.model.fit_problem import OBJECTIVE
+    calls = []
+
+    class Called(Exception):
+        pass
+
+    def build_model(source, out, **kwargs):
+        calls.append(dict(kwargs, source=source, out=out))
+        raise Called
+
+    monkeypatch.setattr(cli, "build_model", build_model)
+    monkeypatch.chdir(tmp_path)
+    anchored = dataclasses.replace(OBJECTIVE, anchor_weight=0.003, anchor_lobes=(1, 2))
+    builds = [dict(k=7, exclude=("pvc", "teflon"), fits_from="old.npz", gmm="diag:5:0.01", objective=OBJECTIVE,
+                   complete=["0:gamma"]),
+              dict(k=10, exclude=(), fits_from=None, gmm=GMM, objective=anchored, complete=True)]
+    for build in builds:
+        command = build_command("merl.npz", "m.npz", **build)
+        with pytest.raises(Called):
+            cli.main(shlex.split(command)[1:])
+        got = calls.pop()
+        assert (got["source"], got["out"]) == ("merl.npz", "m.npz")
+        assert got["k"] == build["k"] and tuple(got["exclude"]) == build["exclude"]
+        assert got["fits_from"] == build["fits_from"] and got["gmm"] == build["gmm"]
+        assert got["objective"] == build["objective"] and got["complete"] == build["complete"]

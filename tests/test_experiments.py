@@ -338,9 +338,9 @@ def test_truth_posterior_report_counts_where_the_objective_prefers_the_recovered
     assert ("ends below the recovered answer's posterior in 1, with the better BRDF in 1; of the 1 basins the "
             "search missed, it reaches a posterior within 5 % of the descent's in 1") in md
     assert md.count("| quarry |") == 8
-    assert "from `benchmarks/results/truth_posterior.json`" in md                 # the file it was made from
+    assert "--results benchmarks/results/truth_posterior.json`" in md          # the file it was made from
     other = os.path.join(truth_posterior.ROOT, "benchmarks", "results", "truth_posterior-trial-x.json")
-    assert "from `benchmarks/results/truth_posterior-trial-x.json`" in truth_posterior.report(rows, other)
+    assert "--results benchmarks/results/truth_posterior-trial-x.json`" in truth_posterior.report(rows, other)
 
 
 def test_paired_against_counts_cases_by_material_and_probe(tmp_path):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf import Material
-from mi_dsbrdf.model import fitting, samples
+from mi_dsbrdf.model import fit_problem, fitting, samples
 from mi_dsbrdf.brdf.measured import MeasuredBRDF, eval_nbrdf, load_nbrdf_weights
 from mi_dsbrdf.evaluation.metrics import log_rmse
 from mi_dsbrdf.brdf.chromaticity import chroma_logits
@@ -52,7 +52,7 @@ def test_grid_subset_keeps_directions_above_horizon():
 def test_jacobian_matches_finite_differences():
     s = samples.samples_from_function(lambda th, td, pd: known_material().eval(th, td),
                                       samples.grid_subset(theta_d_step=15, phi_d_step=60))
-    prob = fitting._Problem(s, 3)
+    prob = fit_problem.FitProblem(s, 3)
     rng = np.random.default_rng(0)
     ctrl = np.stack([np.log([[0.3], [2.0], [5.0]]) + rng.normal(0, .1, (3, 6)),
                      np.log([[2.0], [30.0], [500.0]]) + rng.normal(0, .1, (3, 6))], axis=1)
@@ -119,8 +119,8 @@ def test_fits_of_stiff_merl_materials_converge(nbrdf_file):
         m = fit.material
         assert fit.error < paper and fit.error_cosine < cosine, (name, fit.error, fit.error_cosine)
         assert np.all(np.isfinite(m.log_kappa)) and np.all(np.isfinite(m.log_gamma))
-        assert np.all(m.log_gamma[1:] >= fitting.LOG_GAMMA_BOUNDS[0] - 1e-9)  # only the broad lobe may go flat
-        assert np.all(m.log_gamma[0] >= math.log(fitting.OBJECTIVE.broad_gamma_min) - 1e-9)
+        assert np.all(m.log_gamma[1:] >= fit_problem.LOG_GAMMA_BOUNDS[0] - 1e-9)  # only the broad lobe may go flat
+        assert np.all(m.log_gamma[0] >= math.log(fit_problem.OBJECTIVE.broad_gamma_min) - 1e-9)
         assert np.all(np.diff(m.log_gamma.mean(axis=1)) >= 0)                 # specularity order
 
 
@@ -161,20 +161,20 @@ def test_anchor_settles_what_the_data_do_not_see():
     albedo = np.array([0.5, 0.4, 0.3])
     s = samples.samples_from_function(lambda th, td, pd: np.broadcast_to(albedo / np.pi, (th.size, 3)),
                                       samples.grid_subset(**SUBSET), "lambert")
-    free = fitting.fit_full(s, objective=fitting.FitObjective(anchor_weight=0.0)).variables
-    fit = fitting.fit_full(s, objective=fitting.FitObjective(anchor_weight=0.003))
+    free = fitting.fit_full(s, objective=fit_problem.FitObjective(anchor_weight=0.0)).variables
+    fit = fitting.fit_full(s, objective=fit_problem.FitObjective(anchor_weight=0.003))
     held = fit.variables
-    floor_gamma = math.log(fitting.OBJECTIVE.broad_gamma_min)
+    floor_gamma = math.log(fit_problem.OBJECTIVE.broad_gamma_min)
     np.testing.assert_allclose(free[0, 1], floor_gamma, atol=0.01)                  # on the bounds
-    np.testing.assert_allclose(free[1:, 0], fitting.LOG_KAPPA_BOUNDS[0], atol=0.01)
-    assert held[0, 1].min() > floor_gamma + 2.0 and held[1:, 0].min() > fitting.LOG_KAPPA_BOUNDS[0] + 2.0
-    assert np.abs(held[1:, 1] - np.array(fitting.ANCHORS)[1:, 1, None]).max() < 1.0
+    np.testing.assert_allclose(free[1:, 0], fit_problem.LOG_KAPPA_BOUNDS[0], atol=0.01)
+    assert held[0, 1].min() > floor_gamma + 2.0 and held[1:, 0].min() > fit_problem.LOG_KAPPA_BOUNDS[0] + 2.0
+    assert np.abs(held[1:, 1] - np.array(fit_problem.ANCHORS)[1:, 1, None]).max() < 1.0
     assert fit.error < 0.02 and fit.error_cosine < 0.002, (fit.error, fit.error_cosine)
     np.testing.assert_allclose(held[0, 0], free[0, 0], atol=0.05)                    # the albedo stays
     # every lobe of a known material matters: the anchor leaves its fit accurate
     truth = known_material()
     ks = samples.samples_from_function(lambda th, td, pd: truth.eval(th, td), samples.grid_subset(**SUBSET))
-    known = fitting.fit_full(ks, objective=fitting.FitObjective(anchor_weight=0.003))
+    known = fitting.fit_full(ks, objective=fit_problem.FitObjective(anchor_weight=0.003))
     assert known.error < 3e-3 and known.error_cosine < 3e-3, (known.error, known.error_cosine)
 
 
@@ -195,11 +195,11 @@ def test_unseen_ranges_are_wide_where_the_data_do_not_see_a_value():
     lower, upper = fitting.unseen_ranges(s, ctrl, chroma)
     assert np.all(lower <= ctrl) and np.all(ctrl <= upper)
     assert (upper - lower)[0, 0].max() < 0.1                                     # the albedo: seen
-    gamma_span = fitting.LOG_GAMMA_BOUNDS[1] - fitting.LOG_GAMMA_BOUNDS[0]
+    gamma_span = fit_problem.LOG_GAMMA_BOUNDS[1] - fit_problem.LOG_GAMMA_BOUNDS[0]
     assert (upper - lower)[1:, 1].min() > 0.6 * gamma_span                        # faded lobes' gamma
-    np.testing.assert_allclose(lower[1:, 0], fitting.LOG_KAPPA_BOUNDS[0])
+    np.testing.assert_allclose(lower[1:, 0], fit_problem.LOG_KAPPA_BOUNDS[0])
     assert np.all(upper[1:, 0] < -2.0)                                          # a lobe of kappa e^-2 shows
-    problem = fitting._Problem(s, 3)
+    problem = fit_problem.FitProblem(s, 3)
     z = chroma_logits(chroma)
     cost0 = float(np.sum(problem.residuals(ctrl, z)[0] ** 2))
 

@@ -5,7 +5,7 @@ from scipy.optimize import least_squares
 
 from mi_dsbrdf.brdf.measured import eval_nbrdf, load_nbrdf_weights
 from mi_dsbrdf.lm import levenberg_marquardt
-from mi_dsbrdf.model import fitting
+from mi_dsbrdf.model import fit_problem
 from mi_dsbrdf.model.model_file import shipped_model
 from mi_dsbrdf.model.samples import grid_subset, samples_from_function
 
@@ -53,7 +53,7 @@ def test_reaches_the_cost_of_scipy_least_squares_on_a_merl_fit(nbrdf_file):
     basis = shipped_model().basis
     w = load_nbrdf_weights(nbrdf_file, "blue-acrylic")
     s = samples_from_function(lambda th, td, pd: eval_nbrdf(w, th, td, pd), grid_subset(theta_d_step=6, phi_d_step=30))
-    problem = fitting._Problem(s, basis.n_lobes, basis.knots)
+    problem = fit_problem.FitProblem(s, basis.n_lobes, basis.knots)
     k, R = basis.n_bases, basis.n_lobes
     A, b = basis.bases.reshape(k, -1).T, basis.mean.reshape(-1)
 

@@ -276,7 +276,6 @@ def test_bare_dsbrdf_is_the_model_mean():
 
 def test_shipped_library_matches_the_measurements(nbrdf_file):
     """Rebuilding one library entry from the data reproduces its stored error."""
-    from mi_dsbrdf.model import fitting
     m = shipped()
     names = [str(n) for n in m.arrays["library_names"]]
     i = names.index("pink-felt")
@@ -288,7 +287,6 @@ def test_shipped_library_matches_the_measurements(nbrdf_file):
     assert paper == pytest.approx(float(m.arrays["library_error"][i]), rel=1e-4)
     assert cosine == pytest.approx(float(m.arrays["library_error_cosine"][i]), rel=1e-4)
     assert paper < 0.3 and cosine < 0.05
-    del fitting
 
 
 def test_a_model_built_in_memory_drives_the_plugin_and_inference():
@@ -328,7 +326,7 @@ def test_refitted_library_fits_better_and_the_priors_stay_on_the_scores():
     the build's priors."""
     from conftest import data_path
     from mi_dsbrdf.brdf.curves import CurveBasis
-    from mi_dsbrdf.model.fitting import OBJECTIVE
+    from mi_dsbrdf.model.fit_problem import OBJECTIVE
     nbrdf = data_path("merl", "merl_nbrdf_weights.npz")
     fits = build_model.stored_fits(model_data.shipped_model().arrays)
     keep = [list(fits["names"]).index(n) for n in ("teflon", "nickel", "blue-fabric", "gold-metallic-paint",

@@ -18,7 +18,7 @@ from mi_dsbrdf.app.scenes import scene_path
 from mi_dsbrdf.config import PRESETS
 from mi_dsbrdf.errors import InputError, MiDsbrdfError
 from mi_dsbrdf.model.build import GMM, build_model
-from mi_dsbrdf.model.fitting import OBJECTIVE
+from mi_dsbrdf.model.fit_problem import OBJECTIVE
 from mi_dsbrdf.model.model_file import SHIPPED
 
 

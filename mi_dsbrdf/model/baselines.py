@@ -19,7 +19,7 @@ from scipy.special import expit
 
 from mi_dsbrdf.brdf.angles import from_half_diff
 from mi_dsbrdf.evaluation.metrics import log_rmse
-from mi_dsbrdf.model.fitting import OBJECTIVE, FitObjective
+from mi_dsbrdf.model.fit_problem import OBJECTIVE, FitObjective
 
 LOG_M_MIN, LOG_M_MAX = math.log(1e-3), math.log(2.0)
 
@@ -50,7 +50,7 @@ def cook_torrance(params, theta_h, theta_d, phi_d, n_lobes) -> np.ndarray:
 def fit_cook_torrance(samples, n_lobes, start=None, max_nfev=100, objective: FitObjective = OBJECTIVE):
     """Fit Lambert + ``n_lobes`` Cook-Torrance lobes to
     :class:`~mi_dsbrdf.model.samples.Samples` by the DSBRDF fits' objective
-    (:class:`~mi_dsbrdf.model.fitting.FitObjective`; trust-region least squares).
+    (:class:`~mi_dsbrdf.model.fit_problem.FitObjective`; trust-region least squares).
 
     Starts: for one lobe, roughness m in {0.02, 0.1, 0.3}; for more, ``start``
     (e.g. a one-lobe fit, whose lobe is copied with m x {0.3, 1, 3}) and a

@@ -36,7 +36,8 @@ from mi_dsbrdf.brdf.curves import CurveBasis
 from mi_dsbrdf.brdf.measured import nbrdf_names
 from mi_dsbrdf.errors import MeasuredFileError, ModelError
 from mi_dsbrdf.model import samples
-from mi_dsbrdf.model.fitting import OBJECTIVE, FitObjective, fit_basis, fit_full, unseen_ranges
+from mi_dsbrdf.model.fit_problem import OBJECTIVE, FitObjective
+from mi_dsbrdf.model.fitting import fit_basis, fit_full, unseen_ranges
 from mi_dsbrdf.model.fpca import complete_unseen, fpca
 from mi_dsbrdf.model.model_file import load_model
 from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration, select_gmm
@@ -315,15 +316,32 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
             "fit_objective": fitted_by, "complete_unseen": complete if curves is None else curves,
             "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
-            "command": "mi-dsbrdf build-model --merl %s --out %s%s" % (
-                os.path.basename(os.fspath(source)), os.path.basename(os.fspath(out)),
-                "".join(" --exclude %s" % n for n in exclude) + ("" if gmm == GMM else " --gmm %s" % gmm)
-                + ("" if not objective.anchor_weight else " --fit-anchor %g --fit-anchor-lobes %s" % (
-                    objective.anchor_weight, " ".join(map(str, objective.anchor_lobes))))
-                + ("" if complete is False else " --complete-unseen" + "".join(" " + c for c in curves or ())))}
+            "command": build_command(source, out, k, exclude, fits_from, gmm, objective,
+                                     complete if curves is None else curves)}
     arrays["build_info"] = np.array(json.dumps(info))
     save_model(out, arrays)
     return arrays
+
+
+def build_command(source, out, k=DEFAULT_K, exclude=(), fits_from=None, gmm=GMM,
+                  objective: FitObjective = OBJECTIVE, complete=False) -> str:
+    """The ``mi-dsbrdf build-model`` command line that repeats a build of
+    :func:`build_model`'s arguments (files by their names; options only where
+    they differ from the defaults)."""
+    def name(path):
+        return os.path.basename(os.fspath(path))
+
+    words = ["mi-dsbrdf build-model --merl %s --out %s" % (name(source), name(out))]
+    words += ["--k %d" % k] if k != DEFAULT_K else []
+    words += ["--exclude %s" % n for n in exclude]
+    words += ["--fits-from %s" % name(fits_from)] if fits_from is not None else []
+    words += ["--gmm %s" % gmm] if gmm != GMM else []
+    if objective.anchor_weight:
+        words += ["--fit-anchor %g --fit-anchor-lobes %s" % (objective.anchor_weight,
+                                                            " ".join(map(str, objective.anchor_lobes)))]
+    if complete is not False:
+        words += ["--complete-unseen" + "".join(" " + c for c in ([] if complete is True else complete))]
+    return " ".join(words)
 
 
 def stored_fits(arrays) -> dict:

@@ -1,13 +1,15 @@
 """Fitting DSBRDF materials to measured BRDFs (paper §3.1-3.2).
 
-A fit minimises :data:`OBJECTIVE` (a :class:`FitObjective`): Eq. 5 in the paper's
+A fit minimises :data:`~mi_dsbrdf.model.fit_problem.OBJECTIVE` (a
+:class:`~mi_dsbrdf.model.fit_problem.FitObjective`): Eq. 5 in the paper's
 convention, log(f + 1e-6), plus a weighted cosine-weighted term log(0.01 + f cos
 theta_i), over measured samples of the MERL grid
-(:class:`~mi_dsbrdf.model.samples.Samples`) by Levenberg-Marquardt
-(:func:`mi_dsbrdf.lm.levenberg_marquardt`) with an analytic Jacobian and box
-bounds; errors are reported with Eq. 5 in both conventions
-(:mod:`mi_dsbrdf.evaluation.metrics`). The κ/γ log-curve control values are an affine function of the free
-variables, ``ctrl = A p + b``, which covers the three models with one code path:
+(:class:`~mi_dsbrdf.model.samples.Samples`), by the least-squares problem of
+:mod:`mi_dsbrdf.model.fit_problem` (Levenberg-Marquardt, analytic Jacobian, box
+bounds); errors are reported with Eq. 5 in both conventions
+(:mod:`mi_dsbrdf.evaluation.metrics`). The κ/γ log-curve control values are an
+affine function of the free variables, ``ctrl = A p + b``, which covers the
+three models with one code path:
 
 * ``fit_full``: every control value free (3 lobes x 2 curves x 6 = 36, plus
   2 chromaticity variables per lobe = 42 variables), from the best of a few
@@ -15,7 +17,9 @@ variables, ``ctrl = A p + b``, which covers the three models with one code path:
   defined where grazing angles leave few samples;
 * ``fit_basis``: coefficients ψ of a learned :class:`~mi_dsbrdf.brdf.curves.CurveBasis`
   (k, default 10) plus 2 chromaticity variables per lobe (16 for k = 10);
-* ``fit_constant``: one value per curve (the starts of ``fit_full``).
+* ``fit_constant``: one value per curve (the starts of ``fit_full``);
+* ``unseen_ranges``: how far each control value of a full fit can move unseen
+  by the measurements (the twenty-seventh session's functional-PCA completion).
 
 Chromaticity c_r is a softmax of (z_r0, z_r1, 0): non-negative, sums to one,
 two free variables per lobe. Lobes are ordered by specularity after fitting:
@@ -29,155 +33,20 @@ import math
 
 import numpy as np
 
-from mi_dsbrdf.brdf.angles import log_cos_h
-from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
-from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, spline_matrix
-from mi_dsbrdf.brdf.dsbrdf import LOG_GAMMA_MAX, LOG_KAPPA_MAX, Material, clamp_controls
+from mi_dsbrdf.brdf.chromaticity import chroma_logits
+from mi_dsbrdf.brdf.curves import N_CONTROL
+from mi_dsbrdf.brdf.dsbrdf import Material, clamp_controls
 from mi_dsbrdf.evaluation.metrics import material_errors
-from mi_dsbrdf.lm import levenberg_marquardt
+from mi_dsbrdf.model.fit_problem import (LOG_GAMMA_BOUNDS, N_LOBES, OBJECTIVE, FitObjective, FitProblem,
+                                         control_bounds, solve, squared_norm)
 from mi_dsbrdf.model.samples import Samples
 
-N_LOBES = 3
-#: Bounds of fitted log kappa / log gamma control values. gamma >= 0.2 keeps the
-#: two sharper lobes lobes (gamma -> 0 is a constant, Lambertian term; the broad
-#: lobe may go there, see :attr:`FitObjective.broad_gamma_min`); kappa >= e^-9
-#: lets an unneeded lobe fade out without an unbounded log.
-LOG_KAPPA_BOUNDS = (-9.0, LOG_KAPPA_MAX)
-LOG_GAMMA_BOUNDS = (math.log(0.2), LOG_GAMMA_MAX - 1.0)
 #: Weight of the curvature penalty (second differences of control values).
 SMOOTHNESS = 0.02
 #: Constant-curve starts (gamma per lobe, kappa as fractions of the peak's log).
 STARTS = (((1.0, 60.0, 4000.0), (0.3, 0.8)),
           ((2.0, 25.0, 800.0), (0.5, 0.5)),
           ((0.5, 8.0, 200.0), (0.4, 0.7)))
-
-
-# --- the least-squares problem -----------------------------------------------------
-
-@dataclasses.dataclass(frozen=True)
-class FitObjective:
-    """What a fit minimises: a weighted sum of squared log errors in the two
-    conventions of :mod:`mi_dsbrdf.evaluation.metrics`, each with its own floor::
-
-        paper_weight^2  mean[log(paper_floor + f) - log(paper_floor + rho)]^2
-      + cosine_weight^2 mean[log(cosine_offset + f cos) - log(cosine_offset + rho cos)]^2
-
-    The paper term keeps the dark half of a BRDF (the off-peak floor of metals, the
-    grazing diffuse); the cosine term keeps the peak and the diffuse colour where
-    the picture is bright. A weight of 0 drops its term.
-    """
-    paper_weight: float = 1.0
-    paper_floor: float = 1e-6
-    cosine_weight: float = 3.0
-    cosine_offset: float = 0.01
-    #: Lower bound of the broadest lobe's gamma: small enough, the lobe can be a
-    #: flat (Lambertian) floor, exp(kappa) - 1, where the other lobes keep
-    #: gamma >= LOG_GAMMA_BOUNDS[0] and stay lobes.
-    broad_gamma_min: float = 1e-4
-    #: Weight of a weak pull of every control value towards its lobe's anchor
-    #: (:data:`ANCHORS`), a residual ``anchor_weight * (ctrl - anchor)``. Where
-    #: the data do not see a control value (a faded lobe's gamma, a broad lobe's
-    #: gamma below ~0.01, a faded lobe's kappa) it settles at the anchor instead of
-    #: drifting to a bound or anywhere; where they do see it the pull is negligible.
-    anchor_weight: float = 0.0
-    #: The lobes the anchor holds (0 the broadest, which may instead rest flat on
-    #: ``broad_gamma_min``).
-    anchor_lobes: tuple = (0, 1, 2)
-
-    def terms(self):
-        """(weight, floor, cosine-weighted) of each active term."""
-        t = [(self.paper_weight, self.paper_floor, False), (self.cosine_weight, self.cosine_offset, True)]
-        return [x for x in t if x[0] > 0]
-
-    def logs(self, values, cos_i) -> np.ndarray:
-        """(T, N, 3) weighted logs of (N, 3) BRDF values (1/sr), one slice per
-        active term, scaled so that the sum of squared differences of two
-        ``logs`` is the objective (weight^2 x mean squared log error, summed)."""
-        v = np.maximum(np.asarray(values, dtype=np.float64), 0.0)
-        scale = 1.0 / math.sqrt(v.size)
-        return np.stack([w * scale * np.log(floor + v * (np.asarray(cos_i)[:, None] if cosine else 1.0))
-                         for w, floor, cosine in self.terms()])
-
-
-#: The objective of the shipped model's fits: the paper's convention with its own
-#: floor, the cosine term weighted 3x, a broad lobe free to be flat. Chosen on 16
-#: validation materials by ``benchmarks/fit_objective.py``: median Eq. 5 0.249
-#: (paper) and 0.068 (cosine), against 0.403 and 0.056 for the cosine term alone;
-#: heavier cosine weights trade the paper convention for little (6x: 0.272 / 0.066).
-OBJECTIVE = FitObjective()
-
-#: (log kappa, log gamma) each lobe's control values are pulled towards under
-#: :attr:`FitObjective.anchor_weight`: the medians over the 100 MERL materials of
-#: their unanchored fits' mean control values, rounded (lobe 0 the broadest).
-ANCHORS = ((-2.3, -0.9), (-0.8, 4.5), (0.2, 7.6))
-
-
-class _Problem:
-    """Residuals and Jacobian of the fit error (:class:`FitObjective`) for control
-    values ctrl = A p + b."""
-
-    def __init__(self, samples: Samples, n_lobes, knots=DEFAULT_KNOTS, objective: FitObjective = OBJECTIVE):
-        self.B = spline_matrix(samples.theta_d, knots)                      # (N, 6)
-        self.lch = log_cos_h(np.cos(samples.theta_h), np.sin(samples.theta_h) ** 2)
-        terms = objective.terms()
-        if not terms:
-            raise ValueError("a fit objective needs a term of positive weight")
-        n = samples.cos_i.shape[0]
-        self.objective = objective
-        self.cos_i = samples.cos_i
-        # per term: weight / sqrt(3N) (residuals -> RMSE), floor, weight of f (cos theta_i or 1)
-        self.w = np.array([t[0] for t in terms]) / math.sqrt(3 * n)                      # (T,)
-        self.floor = np.array([t[1] for t in terms])                                       # (T,)
-        self.c = np.stack([samples.cos_i if t[2] else np.ones(n) for t in terms])[:, :, None]  # (T, N, 1)
-        self.y = objective.logs(samples.values, samples.cos_i)                              # (T, N, 3)
-        self.R = n_lobes
-        self.knots = knots
-
-    def lobes(self, ctrl):
-        """(N, R) lobe values L_r and their derivatives by the log kappa and
-        log gamma control values (clamped as in :func:`~mi_dsbrdf.brdf.dsbrdf.clamp_controls`;
-        zero derivative where a clamp is active): (L, dL_da (N, R, 6), dL_dg (N, R, 6))."""
-        lk, lg = clamp_controls(ctrl[:, 0], ctrl[:, 1])
-        free_k = (ctrl[:, 0] == lk).astype(np.float64)          # (R, 6)
-        free_g = (ctrl[:, 1] == lg).astype(np.float64)
-        gamma = np.exp(self.B @ lg.T)                           # (N, R)
-        u = np.exp(self.B @ lk.T + gamma * self.lch[:, None])   # kappa cos^gamma theta_h
-        L = np.expm1(u)
-        dL_a = (L + 1.0) * u
-        dL_g = dL_a * gamma * self.lch[:, None]
-        BB = self.B[:, None, :]
-        return L, dL_a[:, :, None] * BB * free_k[None], dL_g[:, :, None] * BB * free_g[None]
-
-    def residuals(self, ctrl, logits, jac=False):
-        """Residuals (T*3N,) and, with ``jac``, their Jacobians (T*3N, R*2*6) with
-        respect to the control values and (T*3N, R*2) to the chromaticity variables."""
-        L, dL_da, dL_dg = self.lobes(ctrl)
-        C = softmax_chroma(logits)                             # (R, 3)
-        rho = L @ C                                            # (N, 3)
-        res = self.objective.logs(rho, self.cos_i) - self.y
-        if not jac:
-            return res.reshape(-1), None, None
-        fc = self.floor[:, None, None] + np.maximum(rho, 0.0)[None] * self.c   # (T, N, 3)
-        w = self.c / fc * self.w[:, None, None]                # d res / d rho, (T, N, 3)
-        T = w.shape[0]
-        N, R = L.shape
-        # d rho_l / d ctrl[r, curve, j] = C[r, l] dL_r/d(curve) B_j
-        F = np.stack([dL_da, dL_dg], axis=2).reshape(N, R, -1)              # (N, R, 2*6)
-        dC = softmax_jacobian(C)                                            # (R, 3, 2)
-        J_ctrl = np.empty((T, N, 3, R, 2 * N_CONTROL))
-        J_z = np.empty((T, N, 3, R, 2))
-        for t in range(T):
-            for l in range(3):
-                coef = w[t, :, l:l + 1] * C[None, :, l]                     # (N, R)
-                J_ctrl[t, :, l] = coef[:, :, None] * F
-                J_z[t, :, l] = (w[t, :, l:l + 1] * L)[:, :, None] * dC[None, :, l, :]
-        return res.reshape(-1), J_ctrl.reshape(T * N * 3, -1), J_z.reshape(T * N * 3, -1)
-
-
-def _second_differences(n_curves):
-    """(n_curves * 4, n_curves * 6) operator of second differences of control values."""
-    d2 = np.diff(np.eye(N_CONTROL), n=2, axis=0)
-    return np.kron(np.eye(n_curves), d2)
 
 
 @dataclasses.dataclass
@@ -190,74 +59,6 @@ class Fit:
     iterations: int
     at_bounds: list       # lobes whose curves touch a bound ("lobe 2 gamma max", ...)
     variables: np.ndarray  # psi of a basis fit; (R, 2, 6) control values of a full fit
-
-
-def _solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_iter=100, anchor=0.0,
-           anchor_lobes=(0, 1, 2)):
-    """Fit ctrl = A p + b and chromaticity variables z from (p0, z0); ``smoothness``
-    weighs second differences of the control values, ``anchor`` their distance
-    to :data:`ANCHORS` (extra residuals, both linear in p)."""
-    R = problem.R
-    P = A.shape[1]
-    identity = A.shape[0] == P and np.array_equal(A, np.eye(P))
-    D2 = _second_differences(2 * R) * smoothness
-    D = D2 @ A if smoothness else None
-    Db = D2 @ b if smoothness else None
-    if anchor:
-        target = np.repeat(np.array(ANCHORS, dtype=np.float64)[:R].reshape(-1), N_CONTROL)
-        rows = np.repeat(np.isin(np.arange(R), anchor_lobes), 2 * N_CONTROL)
-        D_a, Db_a = anchor * A[rows], anchor * (b - target)[rows]
-        D = D_a if D is None else np.vstack([D, D_a])
-        Db = Db_a if Db is None else np.concatenate([Db, Db_a])
-
-    def unpack(x):
-        return (A @ x[:P] + b).reshape(R, 2, N_CONTROL), x[P:].reshape(R, 2)
-
-    def fun(x, jac):
-        ctrl, z = unpack(x)
-        r, Jc, Jz = problem.residuals(ctrl, z, jac=jac)
-        if D is not None:
-            r = np.concatenate([r, D @ x[:P] + Db])
-        if not jac:
-            return r, None
-        J = np.zeros((r.size, P + 2 * R))
-        n = Jc.shape[0]
-        J[:n, :P] = Jc if identity else Jc @ A
-        J[:n, P:] = Jz
-        if D is not None:
-            J[n:, :P] = D
-        return r, J
-
-    x0 = np.concatenate([p0, np.asarray(z0, dtype=np.float64).reshape(-1)])
-    zb = np.full(2 * R, 30.0)
-    lo = np.concatenate([np.full(P, -np.inf) if lower is None else lower, -zb])
-    hi = np.concatenate([np.full(P, np.inf) if upper is None else upper, zb])
-    res = levenberg_marquardt(lambda x: _normal_equations(fun(x, True)), lambda x: 0.5 * _sq(fun(x, False)[0]),
-                              np.clip(x0, lo, hi), propose=lambda x, step: np.clip(x + step, lo, hi),
-                              max_iter=max_iter)
-    ctrl, z = unpack(res.x)
-    return ctrl, softmax_chroma(z), res.x, res.cost, res.iterations
-
-
-def _normal_equations(rJ):
-    """(g, H) = (J^T r, J^T J): gradient and Gauss-Newton Hessian of |r|^2 / 2."""
-    r, J = rJ
-    return J.T @ r, J.T @ J
-
-
-def _sq(r) -> float:
-    return float(r @ r)
-
-
-def _control_bounds(n, objective):
-    """Lower and upper bounds of (N_LOBES, 2, n) log-curve variables, flattened
-    (lobe 0, the broadest start, down to ``objective.broad_gamma_min``)."""
-    lo = np.empty((N_LOBES, 2, n))
-    hi = np.empty((N_LOBES, 2, n))
-    lo[:, 0], hi[:, 0] = LOG_KAPPA_BOUNDS
-    lo[:, 1], hi[:, 1] = LOG_GAMMA_BOUNDS
-    lo[0, 1] = min(LOG_GAMMA_BOUNDS[0], math.log(objective.broad_gamma_min))
-    return lo.reshape(-1), hi.reshape(-1)
 
 
 def order_lobes(ctrl, chroma):
@@ -295,11 +96,11 @@ def fit_constant(samples: Samples, gamma, kappa, z0, max_iter=25, objective: Fit
     """Constant curves (one log kappa, one log gamma per lobe) fitted from a start.
 
     Returns (ctrl (R, 2, 6), chromaticity (R, 3), cost)."""
-    problem = _Problem(samples, N_LOBES, objective=objective)
+    problem = FitProblem(samples, N_LOBES, objective=objective)
     A = np.kron(np.eye(2 * N_LOBES), np.ones((N_CONTROL, 1)))   # (36, 6): one value per curve
     p0 = np.stack([np.log(kappa), np.log(gamma)], axis=1).reshape(-1)
-    lo, hi = _control_bounds(1, objective)
-    ctrl, chroma, _, cost, _ = _solve(problem, A, np.zeros(A.shape[0]), p0, z0, lo, hi, max_iter=max_iter)
+    lo, hi = control_bounds(1, objective)
+    ctrl, chroma, _, cost, _ = solve(problem, A, np.zeros(A.shape[0]), p0, z0, lo, hi, max_iter=max_iter)
     return ctrl, chroma, cost
 
 
@@ -307,7 +108,7 @@ def fit_full(samples: Samples, name=None, smoothness=SMOOTHNESS, max_iter=80,
              objective: FitObjective = OBJECTIVE) -> Fit:
     """The colour-separated 3-lobe B-spline DSBRDF (42 variables) minimising the fit error,
     from the best of the constant-curve starts :data:`STARTS`."""
-    problem = _Problem(samples, N_LOBES, objective=objective)
+    problem = FitProblem(samples, N_LOBES, objective=objective)
     lum = samples.values.mean(axis=1)
     peak = float(np.max(lum))
     far = samples.theta_h > math.radians(30)
@@ -321,9 +122,9 @@ def fit_full(samples: Samples, name=None, smoothness=SMOOTHNESS, max_iter=80,
         if best is None or cost < best[2]:
             best = (ctrl, chroma, cost)
     ctrl0, chroma0, _ = best
-    lo, hi = _control_bounds(N_CONTROL, objective)
+    lo, hi = control_bounds(N_CONTROL, objective)
     n = 2 * N_LOBES * N_CONTROL
-    ctrl, chroma, _, _, iters = _solve(problem, np.eye(n), np.zeros(n), ctrl0.reshape(-1), chroma_logits(chroma0),
+    ctrl, chroma, _, _, iters = solve(problem, np.eye(n), np.zeros(n), ctrl0.reshape(-1), chroma_logits(chroma0),
                                        lo, hi, smoothness=smoothness, max_iter=max_iter,
                                        anchor=objective.anchor_weight, anchor_lobes=objective.anchor_lobes)
     return _result(samples, ctrl, chroma, iters, name or samples.name, problem.knots)
@@ -333,11 +134,11 @@ def fit_basis(samples: Samples, basis, psi0=None, chroma0=None, name=None, max_i
               objective: FitObjective = OBJECTIVE) -> Fit:
     """The colour-separated basis model: k coefficients psi + 2 chromaticity
     variables per lobe, minimising the fit error (starting at psi0, default 0)."""
-    problem = _Problem(samples, basis.n_lobes, basis.knots, objective)
+    problem = FitProblem(samples, basis.n_lobes, basis.knots, objective)
     A = basis.bases.reshape(basis.n_bases, -1).T
     psi0 = np.zeros(basis.n_bases) if psi0 is None else np.asarray(psi0, dtype=np.float64)
     z0 = _initial_chroma(samples) if chroma0 is None else chroma_logits(chroma0)
-    ctrl, chroma, x, _, iters = _solve(problem, A, basis.mean.reshape(-1), psi0, z0, max_iter=max_iter)
+    ctrl, chroma, x, _, iters = solve(problem, A, basis.mean.reshape(-1), psi0, z0, max_iter=max_iter)
     psi = x[:basis.n_bases]
     return _result(samples, ctrl, chroma, iters, name or samples.name, basis.knots, psi=psi)
 
@@ -377,20 +178,20 @@ def unseen_ranges(samples: Samples, ctrl, chroma, objective: FitObjective = OBJE
         The ranges, ``lower <= ctrl <= upper``.
     """
     ctrl = np.asarray(ctrl, dtype=np.float64)
-    problem = _Problem(samples, ctrl.shape[0], objective=objective)
+    problem = FitProblem(samples, ctrl.shape[0], objective=objective)
     z = chroma_logits(chroma)
     r0, Jc, _ = problem.residuals(ctrl, z, jac=True)
-    cost0 = _sq(r0)
+    cost0 = squared_norm(r0)
     rise = tolerance * cost0
     H = np.einsum("ij,ij->j", Jc, Jc)
-    lo, hi = _control_bounds(N_CONTROL, objective)
+    lo, hi = control_bounds(N_CONTROL, objective)
     x0 = ctrl.reshape(-1)
     lower, upper = x0.copy(), x0.copy()
 
     def seen(j, v):
         x = x0.copy()
         x[j] = v
-        return _sq(problem.residuals(x.reshape(ctrl.shape), z)[0]) - cost0 > rise
+        return squared_norm(problem.residuals(x.reshape(ctrl.shape), z)[0]) - cost0 > rise
 
     for j in range(x0.size):
         half = math.sqrt(rise / H[j]) if H[j] > 0 else math.inf
