@@ -797,3 +797,31 @@ def test_held_out_basis_fits_summary_groups_and_orders_figures():
     assert len(lines) == 4                                   # header, rule, all, two ("none" is empty)
     assert lines[2] == "| m.npz | all (3) | 0.200, 0.200 | 0.020, 0.020 | 20.0, 90.0 | 2.0, 9.0 |"
     assert lines[3] == "| m.npz | two (2) | 0.200, 0.200 | 0.020, 0.020 | 50.0, 90.0 | 5.0, 9.0 |"
+
+
+def test_brdf_losses_are_this_tools_cases_no_better_than_doing_nothing():
+    """brdf_losses.py takes apart the cases whose BRDF ties or loses to the mean
+    material, of this tool only (a report folder holds the Adam baselines too)."""
+    import brdf_losses
+
+    def row(method, error, nothing=1.0):
+        return {"case": {"method": method, "id": "%s-%g" % (method, error)}, "brdf_eq20_paper": error,
+                "baseline": {"brdf_eq20_paper": nothing}}
+    rows = [row("dsbrdf", 1.2), row("dsbrdf", 0.5), row("dsbrdf", 1.0), row("principled-adam", 3.0),
+            row("dsbrdf", float("nan"))]
+    got = [r["case"]["id"] for r in brdf_losses.losses(rows)]
+    assert got == ["dsbrdf-1.2", "dsbrdf-1", "dsbrdf-nan"]     # a tie and a NaN are not wins
+
+
+def test_the_bivariate_table_is_the_measurement_averaged_over_phi_d(tmp_path):
+    """model_class_limit.py's bivariate material: the same value at every phi_d,
+    the measured values' mean over phi_d (a table that varies with phi_d)."""
+    import model_class_limit
+
+    from mi_dsbrdf.brdf.measured import MeasuredBRDF
+    m = MeasuredBRDF.from_function(lambda th, td, pd: np.stack([0.2 + 0.1 * np.cos(2 * pd) + th, 0.3 + 0 * th,
+                                                               0.1 + 0.05 * np.sin(pd) * td], axis=-1), name="x")
+    b = MeasuredBRDF.from_binary(model_class_limit.bivariate_file(m, str(tmp_path))).table
+    np.testing.assert_allclose(b, np.broadcast_to(b[:, :, :1], b.shape))          # no phi_d left
+    np.testing.assert_allclose(b[:, :, 0], m.table.mean(axis=2), rtol=1e-5, atol=1e-7)
+    assert np.ptp(m.table[..., 0], axis=2).max() > 0.1                             # the source did vary
