@@ -140,8 +140,11 @@ def table(rows) -> str:
     return "\n".join(md) + "\n"
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def near_lambertian_cases(doc, argv=None) -> tuple:
+    """The command line of a script over the near-Lambertian validation cases
+    (``--materials``, ``--probes``, ``--workers``): (its arguments, the (material,
+    probe) pairs). Exits with a message without the MERL data."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
     ap.add_argument("--materials", nargs="*", help="default: the near-Lambertian validation materials")
     ap.add_argument("--probes", nargs="*", default=VALIDATION_PROBES)
     ap.add_argument("--workers", type=int, default=2)
@@ -149,8 +152,13 @@ def main(argv=None):
     if not os.path.exists(os.path.join(DATA, "merl", "merl_nbrdf_weights.npz")):
         sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % DATA)
     materials = args.materials or near_lambertian(VALIDATION_MATERIALS)
+    return args, [(m, p) for p in args.probes for m in materials]
+
+
+def main(argv=None):
+    args, pairs = near_lambertian_cases(__doc__, argv)
     rows = []
-    for i, n, r in run_saved(run, OUT, [(m, p) for p in args.probes for m in materials], args.workers, rows):
+    for i, n, r in run_saved(run, OUT, pairs, args.workers, rows):
         print("[%d/%d] %-20s %-28s highlight recovered %.2f, true map %.2f (measured %.2f) | -log posterior "
               "recovered %.0f, true map's material at its best map %.0f" % (
                   i, n, r["material"], os.path.basename(r["probe"]), r["recovered"]["highlight_ratio"],
