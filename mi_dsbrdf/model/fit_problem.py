@@ -101,7 +101,18 @@ ANCHORS = ((-2.3, -0.9), (-0.8, 4.5), (0.2, 7.6))
 
 class FitProblem:
     """Residuals and Jacobian of the fit error (:class:`FitObjective`) for control
-    values ctrl = A p + b."""
+    values ctrl = A p + b (:func:`solve` supplies A and b).
+
+    Parameters
+    ----------
+    samples : Samples
+        N measured samples of the MERL grid (angles in radians, values in 1/sr).
+    n_lobes : int
+        R, the lobes of the DSBRDF.
+    knots : the B-spline knots of the κ/γ curves over theta_d.
+    objective : FitObjective
+        What the residuals measure; the sum of their squares is the objective.
+    """
 
     def __init__(self, samples: Samples, n_lobes, knots=DEFAULT_KNOTS, objective: FitObjective = OBJECTIVE):
         self.B = spline_matrix(samples.theta_d, knots)                      # (N, 6)
