@@ -6,9 +6,9 @@ sun (0.8 %), so the likelihood itself prefers the highlight. This asks whose
 limit that is. For each near-Lambertian validation case (leave-one-out model,
 the app's pixels, the colour pass's forward model: each texel lit from
 ``Config.texel_samples`` squared directions), six materials are each given
-their best map (the true map at the level that matches the image, refined by
-an illumination block of ``REFINE_ITERS`` L-BFGS iterations with the material
-held, as ``truth_posterior.py`` scores the truth; and the same from the
+their best map (``truth_posterior.best_map``: the true map at the level that
+matches the image, refined by an illumination block of 300 L-BFGS iterations
+with the material held, as ``truth_posterior.py`` scores the truth; and the same from the
 recovered answer's map, as the run stored it (float16, clipped), for maps
 far from the true one; the start whose block ends lower counts):
 
@@ -55,13 +55,11 @@ import numpy as np
 from experiments import CACHE, DATA
 from natural_light import OUT as RUNS, PIXELS, ROOT, SHIPPED_SETTING
 from true_map_reflectance import near_lambertian_cases
-from truth_posterior import case_posterior, run_saved
+from truth_posterior import best_map, case_posterior, run_saved
 
 OUT = os.path.join(ROOT, "benchmarks", "results", "model_class_limit.json")
 #: the natural-light run whose answers are the ``recovered`` materials
 RECOVERED = os.path.join(RUNS, "validation" + PIXELS, SHIPPED_SETTING)
-#: L-BFGS iterations of the illumination block that gives each material its best map
-REFINE_ITERS = 300
 #: the objective of the ``cosine fit``: the cosine-weighted convention alone
 COSINE_FIT = {"paper_weight": 0.0, "cosine_weight": 1.0}
 POINTS = ("recovered", "basis fit", "full fit", "cosine fit", "bivariate", "measured")
@@ -95,11 +93,9 @@ def bivariate_file(measured, folder) -> str:
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> dict:
     """The six materials of one case, each under its best map (see the module doc)."""
     import mitsuba as mi
-    from mi_dsbrdf.backend import single_blas_thread
     from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS
     from mi_dsbrdf.brdf.dsbrdf import Material
     from mi_dsbrdf.brdf.measured import MeasuredBRDF
-    from mi_dsbrdf.inference import envmap
     from mi_dsbrdf.inference.forward import apply_transport
     from mi_dsbrdf.model.fit_problem import FitObjective
     from mi_dsbrdf.model.fitting import fit_basis, fit_full
@@ -133,20 +129,15 @@ def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64) -> d
                                                                           "light_colour") if k in terms)}}
     for name in POINTS:
         T = transports[name]
-        ends = []
-        for start in (small, recovered_map):
-            level = np.median(post.observed[post.keep]
-                              / np.maximum(apply_transport(T, start.reshape(-1, 3))[post.keep], 1e-300))
-            x = np.where(seen[..., None], np.log(np.maximum(start * level, 1e-300)), envmap.BLACK).clip(envmap.BLACK)
-            bins = post.entropy.bins_for(x, seen)
-            x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, bins, False, REFINE_ITERS)
-            ends.append((post.illumination_terms(x, T, seen, bins)[0], x))
-        value, x = min(ends, key=lambda e: e[0])
+        ends = [best_map(post, T, start, seen) for start in (small, recovered_map)]
+        values = [post.illumination_terms(x, T, seen, bins)[0] for x, bins in ends]
+        best = int(np.argmin(values))          # a tie keeps the true map's
+        x = ends[best][0]
         image = apply_transport(T, np.where(seen[..., None], np.exp(x), 0.0))
         err = np.abs(np.log(image + post.offset) - np.log(post.observed + post.offset)).mean(axis=1)
         out[name] = {"likelihood": float(post.map_likelihood(x, T, seen, grad=False)[0]),
-                     "abs_log_error_bright": float(err[bright].mean()), "map_objective": float(value),
-                     "from": ("true map", "recovered map")[ends.index(min(ends, key=lambda e: e[0]))]}
+                     "abs_log_error_bright": float(err[bright].mean()), "map_objective": float(values[best]),
+                     "from": ("true map", "recovered map")[best]}
     return out
 
 

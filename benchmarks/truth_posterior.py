@@ -128,24 +128,30 @@ def recovered_point(rec) -> tuple:
     return rec.psi, chroma_logits(rec.chromaticity), np.log(np.maximum(rec.illumination, 1e-300)).clip(envmap.BLACK)
 
 
-def truth_point(post, model, samples, small, seen) -> tuple:
-    """The truth's point: (psi, logits, log map, transport) of the measured material's
-    best basis fit under the true map at the level that matches the image, refined
-    by an illumination block of REFINE_ITERS iterations with the material held."""
+def best_map(post, T, start, seen, iters=REFINE_ITERS) -> tuple:
+    """A material's best map from ``start`` (H, W, 3, any units): the start at the
+    level that matches the image through the transport ``T``, refined by an
+    illumination block of ``iters`` L-BFGS iterations with the material held.
+    Returns (log map (H, W, 3), the entropy prior's bins it was refined with)."""
     from mi_dsbrdf.backend import single_blas_thread
-    from mi_dsbrdf.brdf.chromaticity import chroma_logits
     from mi_dsbrdf.inference import envmap
     from mi_dsbrdf.inference.forward import apply_transport
+    level = np.median(post.observed[post.keep] / np.maximum(apply_transport(T, start.reshape(-1, 3))[post.keep],
+                                                            1e-300))
+    x = np.where(seen[..., None], np.log(np.maximum(start * level, 1e-300)), envmap.BLACK).clip(envmap.BLACK)
+    bins = post.entropy.bins_for(x, seen)
+    return single_blas_thread(envmap.illumination_block)(post, x, T, seen, bins, False, iters), bins
+
+
+def truth_point(post, model, samples, small, seen) -> tuple:
+    """The truth's point: (psi, logits, log map, transport) of the measured material's
+    best basis fit under its best map from the true map (:func:`best_map`)."""
+    from mi_dsbrdf.brdf.chromaticity import chroma_logits
     from mi_dsbrdf.model.fitting import fit_basis
     fit = fit_basis(samples, model.basis).material
     psi, logits = fit.psi, chroma_logits(fit.chromaticity)
     T = post.transport(psi, logits)
-    level = np.median(post.observed[post.keep] / np.maximum(apply_transport(T, small.reshape(-1, 3))[post.keep],
-                                                            1e-300))
-    x = np.where(seen[..., None], np.log(np.maximum(small * level, 1e-300)), envmap.BLACK)
-    x = single_blas_thread(envmap.illumination_block)(post, x, T, seen, post.entropy.bins_for(x, seen),
-                                                      False, REFINE_ITERS)
-    return psi, logits, x, T
+    return psi, logits, best_map(post, T, small, seen)[0], T
 
 
 def run(material, probe, data=DATA, cache=CACHE, map_size=(32, 64), res=64, fits_from=None) -> dict:
