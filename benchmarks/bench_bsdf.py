@@ -61,7 +61,7 @@ def bsdf_throughput(bsdf, n=2_000_000, reps=5):
 
 
 def main():
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--res", type=int, default=256)
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--reps", type=int, default=5)

@@ -1,9 +1,9 @@
-"""Error against run time: this tool beside Adam through Mitsuba's ``prb``, on
-4 MERL materials x 2 light probes (issue 14).
+"""Error against run time: this tool beside Adam through Mitsuba's prb, 4 MERL materials x 2 probes.
 
-Each (material, probe) pair is a synthetic case of ``benchmarks/experiments.py``
-(64x64 sphere, the MERL material rendered under the probe at 64x128, a 32x64 map
-recovered, leave-one-out model), run at several budgets by three methods:
+Each (material, probe) pair is a synthetic case
+(:func:`~mi_dsbrdf.evaluation.benchmark_cases.make_case`: 64x64 sphere, the
+MERL material rendered under the probe at 64x128, a 32x64 map recovered,
+leave-one-out model), run at several budgets by three methods:
 
 * ``dsbrdf``: this tool, rounds x Levenberg-Marquardt iterations per block
   (1 x 5, 2 x 10, 3 x 15 = the default);
@@ -23,10 +23,10 @@ A run of this tool *dominates* an Adam run when it took no longer and its
 error is no larger; the report lists every Adam run no run of this tool
 dominates, per measure: where this tool's curve is not below.
 
-    .venv/bin/python benchmarks/error_vs_time.py            # ~15 min here; resumable
+    .venv/bin/python benchmarks/error_vs_time.py            # ~15 min on 2 cores; resumable
     .venv/bin/python benchmarks/error_vs_time.py --report   # redraw from the results
 
-Writes benchmarks/results/error_vs_time/<id>.json and docs/error_vs_time.{md,png}.
+Writes out/error_vs_time/<id>.json (one a run) and docs/error_vs_time.{md,png}.
 """
 from __future__ import annotations
 
@@ -38,12 +38,10 @@ import sys
 
 import numpy as np
 
-from compare_experiments import measure
-from experiments import CACHE, DATA, make_case, run_on_cluster
+from mi_dsbrdf.evaluation.benchmark_cases import (CACHE, DATA, DOCS, OUT as OUT_ROOT, have_data, make_case, measure,
+                                                  run_on_cluster)
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-OUT = os.path.join(ROOT, "benchmarks", "results", "error_vs_time")
-DOCS = os.path.join(ROOT, "docs")
+OUT = os.path.join(OUT_ROOT, "error_vs_time")
 MATERIALS = ["blue-acrylic", "gold-metallic-paint", "red-fabric", "pvc"]
 PROBES = ["probulator/grace.hdr", "probulator/ennis.hdr"]
 DSBRDF_BUDGETS = [(1, 5), (2, 10), (3, 15)]
@@ -56,6 +54,8 @@ COLOURS = {"dsbrdf": "C0", "dsbrdf-adam": "C1", "principled-adam": "C2"}
 
 
 def cases() -> list:
+    """Every run: per material and probe, this tool at each budget, doing nothing,
+    and each Adam method at each number of iterations."""
     out = []
     for m in MATERIALS:
         for p in PROBES:
@@ -98,6 +98,7 @@ def _by_budget(rs) -> dict:
 
 
 def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
+    """``docs/error_vs_time.{md,png}`` from the runs in ``results_dir``; returns the markdown's path."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -208,7 +209,7 @@ def main(argv=None):
     ap.add_argument("--out", default=OUT)
     args = ap.parse_args(argv)
     if not args.report:
-        if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
+        if not have_data(args.data):
             sys.exit("this benchmark needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         s = run_on_cluster(cases(), args.out, args.data, args.workers, cache=CACHE)
         if s["failed"]:

@@ -1,27 +1,27 @@
 """The colour of each probe's light, and the light-colour prior's spreads.
 
-For every probe of ``../shared/data/envmaps`` at the maps' 32x64: the
+For every validation and report probe at the maps' 32x64: the
 solid-angle-weighted mean radiance (what a white sphere sees) as a
 chromaticity, and its colour temperature and tint (the axes of
 :class:`~mi_dsbrdf.inference.illumination_priors.LightColourPrior`). The
 spreads ``Config.light_temperature_sigma`` and ``light_tint_sigma`` are the root
 mean square of the two over the *validation* probes only
-(``natural_light.VALIDATION_PROBES``); the report probes are listed beside,
+(``benchmark_cases.VALIDATION_PROBES``); the report probes are listed beside,
 not used. Prints a markdown table; a second or so.
 
-    .venv/bin/python benchmarks/light_colours.py
+    .venv/bin/python benchmarks/light_colours.py [--data ../shared/data]
 """
 from __future__ import annotations
 
+import argparse
 import os
 
 import numpy as np
 
-from experiments import DATA
-from mi_dsbrdf.app.io import read_image
+from mi_dsbrdf.evaluation.benchmark_cases import DATA, REPORT_PROBES, VALIDATION_PROBES
 from mi_dsbrdf.evaluation.experiment import downsample
 from mi_dsbrdf.inference.illumination_priors import LIGHT_AXES, LightColourPrior
-from natural_light import REPORT_PROBES, VALIDATION_PROBES
+from mi_dsbrdf.inference.images import read_image
 
 
 def light_colour(probe, data=DATA, size=(32, 64)) -> tuple:
@@ -38,13 +38,16 @@ def spreads(probes, data=DATA) -> np.ndarray:
     return np.sqrt((y ** 2).mean(axis=0))
 
 
-def main():
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default=DATA, help="the folder holding envmaps/ (default %(default)s)")
+    args = ap.parse_args(argv)
     print("| probe | set | chromaticity | temperature | tint |\n|---|---|---|---|---|")
     for probes, name in ((VALIDATION_PROBES, "validation"), (REPORT_PROBES, "report")):
         for p in probes:
-            c, (t, g) = light_colour(p)
+            c, (t, g) = light_colour(p, args.data)
             print("| %s | %s | (%.3f, %.3f, %.3f) | %+.3f | %+.3f |" % (os.path.basename(p), name, *c, t, g))
-    t, g = spreads(VALIDATION_PROBES)
+    t, g = spreads(VALIDATION_PROBES, args.data)
     print("\nRoot mean square over the validation probes: temperature %.3f, tint %.3f "
           "(Config.light_temperature_sigma, light_tint_sigma)" % (t, g))
 

@@ -22,7 +22,8 @@ slice (every 6th theta_d, every 30th phi_d) to keep the run short. Writes
     docs/model_error.png                  all materials, sorted (Fig. 2)
 
     .venv/bin/python benchmarks/model_error.py [--merl ../shared/data/merl/merl_nbrdf_weights.npz]
-        [--workers 2] [--only NAME ...]
+        [--workers 2] [--only NAME ...]          # ~14 min on 2 cores
+    .venv/bin/python benchmarks/model_error.py --report-only   # the docs again from the JSON
 """
 import argparse
 import json

@@ -1,25 +1,25 @@
-"""Natural-light recovery against doing nothing, on a validation and a report set (issue 15).
+"""Natural-light recovery against doing nothing, on a validation and a report set.
 
-Each case is a synthetic probe case of ``benchmarks/experiments.py`` (64x64
-sphere, the MERL material rendered under the probe at 64x128, a 32x64 map
+Each case is a synthetic probe case (:func:`~mi_dsbrdf.evaluation.benchmark_cases.make_case`:
+64x64 sphere, the MERL material rendered under the probe at 64x128, a 32x64 map
 recovered, leave-one-out model: the material's own fit is left out of the
 bases and priors). Every result carries its own do-nothing baseline
 (:func:`mi_dsbrdf.evaluation.experiment.run_case`, ``baseline``): the model's
 mean material (psi = 0) for the BRDF and relighting, a constant map on the same
 seen texels for the illumination.
 
-Two disjoint sets of materials and probes:
+Two disjoint sets of materials and probes
+(:mod:`mi_dsbrdf.evaluation.benchmark_cases`):
 
-* **validation** (:data:`VALIDATION_MATERIALS` x :data:`VALIDATION_PROBES`): the
-  only cases settings and weights are chosen on (``--set validation
-  --config w_entropy=300 ...`` runs one setting into its own folder under
-  ``validation-interior/`` (:data:`PIXELS`); ``--choose`` scores the settings of ``validation_sweep/``
-  (:data:`SWEEP`) and the code of that time (:data:`SWEEP_SHIPPED`), and writes
-  the choice);
-* **report** (:data:`REPORT_MATERIALS` x :data:`REPORT_PROBES`): 12 materials
-  spanning the four GMM clusters of the shipped model, 6 probes; run once with
-  the shipped defaults, with principled + Adam and DSBRDF + Adam through
-  ``prb`` at about this tool's median time beside them.
+* **validation** (20 materials x 3 probes): the only cases settings are chosen
+  on. ``--set validation --config NAME=VALUE ...`` runs one setting into its own
+  folder; ``--choose`` scores every setting run so far against doing nothing and
+  against the shipped code's run (:func:`choose`) and writes the choice to
+  ``benchmarks/results/natural_light_choice.json``;
+* **report** (12 materials x 6 probes): the shipped defaults only, with
+  principled + Adam and DSBRDF + Adam through ``prb`` at about this tool's
+  median time beside them (``--adam``). ``--summary`` prints the README's
+  accuracy table; ``--report`` writes ``docs/natural_light.{md,png}``.
 
 Measures, lower is better except PSNR: BRDF Eq. 20 in the paper's convention
 log(f + 1e-6) and in the cosine-weighted log(1 + f cos theta_i); the
@@ -28,18 +28,22 @@ the relit images' (two other probes) scale-invariant log error and
 Stanford-ORB PSNR (dB); for near-Lambertian materials the recovered peak /
 off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
 
-    .venv/bin/python benchmarks/natural_light.py --set validation            # 60 cases, ~15 min
-    .venv/bin/python benchmarks/natural_light.py --set validation --config w_entropy=300 w_gradient=300
-    .venv/bin/python benchmarks/natural_light.py --choose   # scores the settings, writes the choice
-    .venv/bin/python benchmarks/natural_light.py --set validation --gmm full:2:0.01   # leave-one-out GMM structure
-    .venv/bin/python benchmarks/natural_light.py --choose-gmm   # validation-interior/* -> gmm_choice_interior.json
-    .venv/bin/python benchmarks/natural_light.py --set validation --truth-samples 4 --config texel_samples=2 \
-        --materials violet-acrylic nickel   # truth from the probe integrated over each texel
+Each case writes ``out/natural_light/<set>[-truthS][-exposureE][-photonsN]/<setting>/<id>.json``
+(and ``.npz``, its images) when it finishes; a rerun skips the cases whose file
+exists (delete a setting's folder to run it again after a change of the code).
+
+    .venv/bin/python benchmarks/natural_light.py --set validation            # the shipped code, 60 cases, ~15 min
+    .venv/bin/python benchmarks/natural_light.py --set validation --exposure 1.7   # its second run (rounding only)
+    .venv/bin/python benchmarks/natural_light.py --set validation --config w_gmm=100   # another setting
+    .venv/bin/python benchmarks/natural_light.py --set validation --gmm full:2:0.01    # leave-one-out GMM structure
+    .venv/bin/python benchmarks/natural_light.py --choose         # -> benchmarks/results/natural_light_choice.json
+    .venv/bin/python benchmarks/natural_light.py --set validation --config w_gmm=100 --summary --against defaults
+    .venv/bin/python benchmarks/natural_light.py --set report                # 72 cases, ~12 min
     .venv/bin/python benchmarks/natural_light.py --set report --adam         # 72 x 3 cases, ~2 h
-    .venv/bin/python benchmarks/natural_light.py --set report --adam principled-adam   # 72 x 2 cases
-    .venv/bin/python benchmarks/natural_light.py --set report --summary      # tables from the results
-    .venv/bin/python benchmarks/natural_light.py --set report --truth-samples 4   # the truth integrated, ~50 min
+    .venv/bin/python benchmarks/natural_light.py --set report --summary      # the README's table
     .venv/bin/python benchmarks/natural_light.py --set report --report       # -> docs/natural_light.{md,png}
+    .venv/bin/python benchmarks/natural_light.py --set report --truth-samples 4   # the truth integrated over each texel
+    .venv/bin/python benchmarks/natural_light.py --set report --photons 1000 --adam   # with shot noise
 """
 from __future__ import annotations
 
@@ -47,97 +51,36 @@ import argparse
 import glob
 import json
 import os
-import re
 import sys
 
 import numpy as np
 
-from experiments import DATA, make_case, run_on_cluster
-from mi_dsbrdf.model.build import DEFAULT_K, GMM, gmm_structure
+from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN, OUT as OUT_ROOT,
+                                                  REPORT_MATERIALS, REPORT_PROBES, RESULTS, ROOT,
+                                                  VALIDATION_MATERIALS, VALIDATION_PROBES, have_data, make_case,
+                                                  parse_config, parse_setting, run_on_cluster, setting_name,
+                                                  tonemap)
+from mi_dsbrdf.model.build import DEFAULT_K, GMM
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-OUT = os.path.join(ROOT, "benchmarks", "results", "natural_light")
-#: validation: two materials of each kind (acrylic or phenolic, metallic paint or
-#: paint, fabric, plastic, foam or rubber, metal), an indoor probe, an overcast
-#: urban panorama and a sunlit quarry. The prior weights were chosen on the first
-#: six materials under the first two probes (12 cases, ``validation_sweep/``); the
-#: GMM's structure on all twelve under the first two; the quarry joined them when
-#: the first two turned out to hold no small bright source (the brightest texel
-#: 61x and 5x the median, against 40000x for grace and 9500x for the quarry's sun),
-#: which the report set has and the tuned settings failed on (``gmm_choice.json``).
-#: The last eight joined in the seventh session, drawn at random (numpy
-#: ``default_rng(15)``, :data:`GROWN_VALIDATION`) from the library materials in neither
-#: set, six from the shipped GMM's cluster 2 (paints, rubbers: 55 of the library's 100,
-#: 4 of the first twelve) and two from cluster 3 (31 of 100, 4 of twelve), so that the
-#: validation set holds the clusters in the library's proportions: the texel_samples 2
-#: trial had won on a validation set with few mildly glossy materials and lost on the
-#: report set, which has more
-VALIDATION_MATERIALS = ["violet-acrylic", "silver-metallic-paint", "blue-fabric", "yellow-plastic",
-                        "polyurethane-foam", "nickel",
-                        "specular-blue-phenolic", "dark-red-paint", "white-fabric", "gray-plastic",
-                        "neoprene-rubber", "brass",
-                        "color-changing-paint2", "purple-paint", "special-walnut-224", "gold-metallic-paint2",
-                        "teflon", "pink-plastic", "blue-metallic-paint2", "yellow-phenolic"]
-#: how the last eight validation materials were drawn: (seed, {cluster: count})
-GROWN_VALIDATION = (15, {2: 6, 3: 2})
-VALIDATION_PROBES = ["probulator/wells.hdr", "polyhaven/pedestrian_overpass_1k.hdr", "polyhaven/quarry_01_1k.hdr"]
-#: report: 12 other materials, by GMM cluster of the shipped model (0: foams and
-#: fabrics; 1: metals, acrylics, phenolics; 2: paints, rubbers, fabrics; 3: the
-#: rest), and six other probes (four indoor/outdoor probes, a hard low sun, a sunset)
-REPORT_MATERIALS = ["light-brown-fabric",
-                    "blue-acrylic", "alum-bronze", "specular-red-phenolic", "white-marble",
-                    "pink-fabric", "orange-paint", "pure-rubber",
-                    "gold-metallic-paint", "red-fabric", "pvc", "pink-felt"]
-REPORT_PROBES = ["probulator/grace.hdr", "probulator/ennis.hdr", "probulator/pisa.hdr", "probulator/uffizi.hdr",
-                 "polyhaven/blouberg_sunrise_2_1k.hdr", "polyhaven/venice_sunset_1k.hdr"]
-#: Adam through prb at about this tool's median time on these cases (8 spp; 150
-#: iterations took 12 s on one core at 64x64, this tool's median on the validation
-#: set was 33 s; 400 iterations took 18.6 s a report case in the eighteenth session
-#: against this tool's 14 s; since the twenty-second session's second route this tool
-#: takes 23 s, and 500 iterations match it)
+#: per-case results: <set>[-truthS][-exposureE][-photonsN]/<setting>/ under it
+OUT = os.path.join(OUT_ROOT, "natural_light")
+#: Adam through prb at about this tool's median time a report case (8 spp)
 ADAM_ITERS, ADAM_SPP = 500, 8
 #: the Adam baselines ``--adam`` runs (``--adam principled-adam``: that one only)
 ADAM_METHODS = ("principled-adam", "dsbrdf-adam")
-#: a measured BRDF whose peak / off-peak ratio is below this is near-Lambertian; its
-#: recovery has no highlight when its ratio is below HIGHLIGHT_LIMIT times the measured one
-NEAR_LAMBERTIAN, HIGHLIGHT_LIMIT = 1.5, 1.5
 #: (key, label, higher is better)
 MEASURES = [("brdf_eq20_paper", "BRDF Eq. 20 paper", False), ("brdf_eq20_cosine", "BRDF Eq. 20 cosine", False),
             ("illumination_error", "illumination log(1 + L)", False),
             ("illumination_error_paper", "illumination log(L + 1e-6)", False), ("relight", "relit", False),
             ("relight_psnr", "relit PSNR dB", True)]
-assert not set(VALIDATION_MATERIALS) & set(REPORT_MATERIALS)
-assert not set(VALIDATION_PROBES) & set(REPORT_PROBES)
-
-
-def parse_config(items) -> dict:
-    """``["w_entropy=300", "map_levels=1"]`` -> {"w_entropy": 300.0, "map_levels": 1}; the
-    parts of a :func:`setting_name` (``["w_entropy300", "map_levels1"]``) read alike."""
-    out = {}
-    for item in items or []:
-        k, v = (item.split("=", 1) if "=" in item
-                else re.fullmatch(r"(.*?)(-?[0-9.]+(?:e[-+]?[0-9]+)?)", item).groups())
-        out[k] = int(v) if v.lstrip("-").isdigit() else float(v)
-    return out
-
-
-def setting_name(config, gmm=None, bases=None, start=None) -> str:
-    """``w_gmm100-w_gradient30000``, with ``gmm-full-2-0.01-`` before it for a GMM
-    structure other than the build's, ``bases12-`` before that for another number
-    of bases and ``start0-`` before that for one reflectance start; ``defaults`` for
-    none of them."""
-    name = "-".join("%s%g" % (k, v) for k, v in sorted(config.items()))
-    if gmm is not None:
-        name = "-".join(["gmm"] + [str(p) for p in gmm_structure(gmm)] + ([name] if name else []))
-    if bases is not None:
-        name = "-".join(["bases%d" % bases] + ([name] if name else []))
-    if start is not None:
-        name = "-".join(["start%d" % start] + ([name] if name else []))
-    return name or "defaults"
 
 
 def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None, exposure=1.0,
           photons=None, bases=None, start=None, fits_from=None) -> list:
+    """The cases of a set (``"validation"`` or ``"report"``): each material under
+    each probe with ``config`` (Config overrides), then the ``adam`` methods' on the
+    same pairs; the other arguments become case fields
+    (:func:`~mi_dsbrdf.evaluation.experiment.run_case`)."""
     mats, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                     else (REPORT_MATERIALS, REPORT_PROBES))
     mats = [m for m in mats if materials is None or m in materials]
@@ -199,7 +142,7 @@ def summary(folder) -> str:
     for method, rs in sorted(by_method.items()):
         cells = []
         for key, _, hi in MEASURES:
-            if any(key not in r for r in rs):           # results written before the measure existed
+            if any(key not in r for r in rs):           # results without this measure
                 cells.append("–")
                 continue
             wins, median = against_nothing(rs, key, hi)
@@ -253,68 +196,29 @@ def summary(folder) -> str:
     return "\n".join(md) + "\n"
 
 
+
 #: the measures a setting is chosen on (BRDF, illumination and what a user sees)
 CHOICE_MEASURES = ("brdf_eq20_paper", "illumination_error", "relight")
-CHOICE = os.path.join(OUT, "validation_choice.json")
-#: every run since the eighteenth session infers from the app's pixels
-#: (:func:`mi_dsbrdf.inference.pixels.usable_pixels`: the silhouette ring dropped)
-#: and writes under ``<set>-interior...``; ``<set>/`` and its siblings hold the runs
-#: before, which kept the ring
-PIXELS = "-interior"
-#: the GMM's structure and weight, chosen among the settings under ``validation-interior/``
-#: (the shipped code is ``second_route_highlight2``, before the twenty-second session
-#: ``max_rounds3``; the others ran with ``--gmm`` / ``--config``);
-#: ``gmm_choice.json`` holds the standing of the runs that kept the silhouette ring
-GMM_CHOICE = os.path.join(OUT, "gmm_choice_interior.json")
-#: the weight sweep: every setting run before the start and the grey pass kept the
-#: lobes at the image's colour (the chromaticity start from the image was in); the
-#: weights were chosen there, and SWEEP_SHIPPED holds the code of that time on the
-#: same cases (``validation/defaults-eps0.01``: ``defaults`` until gradient_eps became
-#: 0.1, renamed so that a run of today's defaults does not resume into it)
-SWEEP = os.path.join(OUT, "validation_sweep")
-SWEEP_SHIPPED = os.path.join(OUT, "validation", "defaults-eps0.01")
-#: settings the rule picked on validation and something outside it then overruled
-#: (setting name: why): they are scored and listed, never chosen. The report set
-#: decided this once, against the rule (docs/natural_light_history.md, "The forward
-#: model's texel sampling"; only the setting the report set ran is barred: texel_samples 2
-#: with other GMM settings was not run there). (Issue 14's run time overruled two
-#: start candidates in the eleventh session; the time guard below, declared in the
-#: twelfth, now says the same by rule.)
-OVERRULED = {"texel_samples2": "chosen on validation (0.565 against 0.623 at texel centres), then worse on the "
+#: where ``--choose`` writes the choice (the README and Config's docs quote it)
+CHOICE = os.path.join(RESULTS, "natural_light_choice.json")
+#: settings the rule would pick on validation but a measure outside it rules out
+#: (setting name: why): they are scored and listed, never chosen
+OVERRULED = {"texel_samples2": "better on validation (0.565 against 0.623 at texel centres) but worse on the "
                                "report set (BRDF better than the mean material in 51 of 72 cases against 59, "
                                "relit in 61 against 65): spurious sharp highlights on mildly glossy materials, "
-                               "which the validation set had few of"}
-#: the time guard (declared in the twelfth session, before the run it first judged):
-#: a setting whose median time a case is more than TIME_RATIO times the reference's
-#: must lower the score by more than SCORE_NOISE, the largest spread between two
-#: validation runs of the same code (0.543 and 0.552 in the tenth session; 0.533
-#: and 0.534 in the eleventh). The medians come from separate runs, not side by
-#: side; this machine's day-to-day drift in them has been below 10 %
+                               "which the validation set has few of"}
+#: the time guard: a setting whose median time a case is more than TIME_RATIO times
+#: the reference's must lower the score by more than SCORE_NOISE, the largest spread
+#: between two validation runs of the same code
 TIME_RATIO, SCORE_NOISE = 1.2, 0.01
-#: the validation folder of the shipped code, the default reference of the choice's wins
-#: guard (:func:`choose`, ``--choose-gmm --reference``); rerun it when the shipped code's
-#: results may have moved. One run is one draw: the code before it, stored in
-#: ``gmm_volume0-grey_texel_samples1-texel_samples2`` (seventh session) and rerun unchanged
-#: in the tenth (``w_chromaticity0-w_light_colour0``), came back with 59 and 58 BRDF wins and
-#: 15 and 13 near-Lambertian cases without a highlight (white-fabric x quarry_01 flips
-#: between 0.52 and 1.40 on the order of float sums); the tenth session's choice was made
-#: against the rerun, run the same day as the settings it judged; the eleventh session's
-#: rerun of that code (``start_candidates1``) matched its stored run's wins exactly. Since
-#: the twelfth session the shipped code divides the image by its level (a result must not
-#: depend on the image's units; not a setting the rule chooses), and its run is
-#: ``max_rounds3``: a no-op override, which names a fresh folder for the same defaults.
-#: Since the twenty-second session the shipped code is ``second_route_highlight2`` (chosen
-#: against ``max_rounds3`` over two draws; under today's defaults also a no-op override)
-SHIPPED_SETTING = "second_route_highlight2"
-#: the second draw of a validation setting (``--exposure``; declared in the twentieth
-#: session, before any setting's second draw ran): one draw moves wins by a rounding
-#: (the report set's relit wins were 63 and 66 in two draws of the same code, and
-#: nine validation settings scored below the shipped code's 0.583 and all had fewer
-#: wins than its one draw on some measure). Each image times this factor changes
-#: only rounding (inference divides the image by its level); :func:`choose` judges a
-#: setting with a second draw on both draws pooled against the reference's two
-SECOND_DRAW_EXPOSURE = 1.7
-
+#: the validation folder of the shipped code's run, the default reference of the
+#: choice's guards (``--reference``)
+REFERENCE = "defaults"
+#: the exposure of a setting's second run (``--exposure``): each image times this
+#: factor changes only rounding (inference divides the image by its level), so the
+#: second run is another sample of the optimiser's path; :func:`choose` judges a
+#: setting with a second run on both runs pooled against the reference's two
+SECOND_RUN_EXPOSURE = 1.7
 
 def overruled(name) -> str | None:
     """Why the setting ``name`` (a :func:`setting_name`) may not be chosen, or None."""
@@ -338,12 +242,12 @@ def near_lambertian_clean(rows) -> tuple:
 
 def setting_scores(*folders) -> dict:
     """Per measure of CHOICE_MEASURES, the median over the cases of this tool in
-    ``folders`` (one folder: one draw; several: the same cases' draws, pooled; a
+    ``folders`` (one folder: one run; several: the same cases' runs, pooled; a
     report folder also holds the Adam baselines' cases) of (result / doing nothing)
     and the number of cases below doing nothing; ``score`` is the mean of those
-    medians (lower is better), ``draws`` the number of folders pooled."""
+    medians (lower is better), ``runs`` the number of folders pooled."""
     rows = [r for folder in folders for r in own_rows(load_results(folder))]
-    out = {"cases": len(rows) // len(folders), "draws": len(folders),
+    out = {"cases": len(rows) // len(folders), "runs": len(folders),
            "seconds_median": float(np.median([r["seconds"] for r in rows]))}
     for key in CHOICE_MEASURES:
         wins, median = against_nothing(rows, key)
@@ -387,47 +291,28 @@ def against_table(folder, reference) -> str:
     return "\n".join(lines)
 
 
-def parse_setting(name) -> tuple:
-    """(GMM structure or None, Config overrides, number of bases or None, the one
-    reflectance start or None) of a :func:`setting_name`."""
-    parts = [] if name == "defaults" else name.split("-")
-    start = None
-    if re.fullmatch(r"start[0-9]+", parts[0] if parts else ""):
-        start, parts = int(parts[0][5:]), parts[1:]
-    bases = None
-    if re.fullmatch(r"bases[0-9]+", parts[0] if parts else ""):
-        bases, parts = int(parts[0][5:]), parts[1:]
-    gmm = None
-    if parts[:1] == ["gmm"]:
-        n = 2 if parts[1] == "bic" else 4
-        gmm, parts = ":".join(parts[1:n]), parts[n:]
-    return gmm, parse_config(parts), bases, start
 
-
-def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_draw=None) -> dict:
-    """The validation setting with the lowest score (:func:`setting_scores`) among
-    the complete ones (``n_cases`` run; default: as many as the setting with the
-    most), and every setting's scores.
+def choose(root, n_cases=None, command="--choose", reference=None, second_run=None) -> dict:
+    """The validation setting (a folder under ``root``) with the lowest score
+    (:func:`setting_scores`) among the complete ones (``n_cases`` run; default: as
+    many as the setting with the most), and every setting's scores.
 
     Not chosen: the OVERRULED settings, and, given the folder name ``reference``
-    of the shipped code, every setting with fewer wins (cases better than doing
-    nothing) than it on any of CHOICE_MEASURES or fewer near-Lambertian cases
-    without a highlight (the wins guard, declared in the seventh session before the
-    runs it first judged: the median-ratio score let texel_samples 2 win on large
-    gains in a third of the cases over losses in a sixth, and the issue's targets
-    count wins), and every setting slower than TIME_RATIO times the reference's
-    median time a case whose score is not below the reference's by SCORE_NOISE
-    (the time guard).
+    of the shipped code's run, every setting with fewer wins (cases better than
+    doing nothing) than it on any of CHOICE_MEASURES or fewer near-Lambertian
+    cases without a highlight (the wins guard: the median-ratio score alone can
+    prefer large gains in a few cases over losses in more), and every setting
+    slower than TIME_RATIO times the reference's median time a case whose score
+    is not below the reference's by SCORE_NOISE (the time guard).
 
-    The second draw (``second_draw``, a folder of the same settings run with each
-    image x SECOND_DRAW_EXPOSURE; declared in the twentieth session before any
-    setting's second draw ran): where a setting and the reference both have all
-    their cases there, the setting is judged on its two draws pooled against the
-    reference's two (:func:`setting_scores` of both folders: medians and wins over
-    the cases of both draws), otherwise on its first draw against the reference's
-    first. Settings are ranked by their score less the reference's on the same
-    draws (without a reference: by their score); each setting's case-by-case count
-    against the best (``against_best``) is of the first draws."""
+    The second run (``second_run``, a folder of the same settings run with each
+    image x SECOND_RUN_EXPOSURE): where a setting and the reference both have
+    all their cases there, the setting is judged on its two runs pooled against
+    the reference's two (:func:`setting_scores` of both folders: medians and wins
+    over the cases of both runs), otherwise on its first run against the
+    reference's first. Settings are ranked by their score less the reference's
+    on the same runs (without a reference: by their score); each setting's
+    case-by-case count against the best (``against_best``) is of the first runs."""
     scores = {os.path.basename(d): setting_scores(d) for d in sorted(glob.glob(os.path.join(root, "*")))
               if os.path.isdir(d)}
     n_cases = n_cases or max([v["cases"] for v in scores.values()] + [1])
@@ -435,18 +320,18 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
     if not complete:
         raise SystemExit("no complete validation setting under %s" % root)
     if reference is not None and reference not in complete:
-        raise SystemExit("the shipped code's setting %s has not run on all %d validation cases under %s"
+        raise SystemExit("the reference setting %s has not run on all %d validation cases under %s"
                          % (reference, n_cases, root))
-    # the reference's scores on the draws each setting is judged on
+    # the reference's scores on the runs each setting is judged on
     against = {k: complete[reference] for k in complete} if reference is not None else {}
-    if reference is not None and second_draw is not None:
-        def drawn(k):
-            return len(own_rows(load_results(os.path.join(second_draw, k)))) == n_cases
-        if drawn(reference):
-            both = setting_scores(os.path.join(root, reference), os.path.join(second_draw, reference))
-            for k in [k for k in complete if drawn(k)]:
-                complete[k] = dict(setting_scores(os.path.join(root, k), os.path.join(second_draw, k)),
-                                   first_draw=complete[k])
+    if reference is not None and second_run is not None:
+        def rerun(k):
+            return len(own_rows(load_results(os.path.join(second_run, k)))) == n_cases
+        if rerun(reference):
+            both = setting_scores(os.path.join(root, reference), os.path.join(second_run, reference))
+            for k in [k for k in complete if rerun(k)]:
+                complete[k] = dict(setting_scores(os.path.join(root, k), os.path.join(second_run, k)),
+                                   first_run=complete[k])
                 against[k] = both
     barred = {k: why for k in complete if (why := overruled(k)) is not None}
     short, slow = {}, {}
@@ -458,7 +343,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
             fewer.append("near-Lambertian without a highlight %d < %d" % (v["near_lambertian_clean"],
                                                                           ref["near_lambertian_clean"]))
         if fewer:
-            short[k] = "; ".join(fewer) + (" (%d draws)" % v["draws"] if v["draws"] > 1 else "")
+            short[k] = "; ".join(fewer) + (" (%d runs)" % v["runs"] if v["runs"] > 1 else "")
         if v["seconds_median"] > TIME_RATIO * ref["seconds_median"] and v["score"] >= ref["score"] - SCORE_NOISE:
             slow[k] = ("%.2fx the reference's time a case for a score of %.3f against its %.3f (the guard asks "
                        "for less than %.3f)" % (v["seconds_median"] / ref["seconds_median"], v["score"],
@@ -475,12 +360,12 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
     rule = "lowest mean over the measures of the median ratio to doing nothing"
     if reference is not None:
         rule += (", among the settings with no fewer wins on each measure and no fewer near-Lambertian cases "
-                 "without a highlight than the shipped code (%s), and, if more than %gx its median time a case, "
+                 "without a highlight than the shipped code's run (%s), and, if more than %gx its median time a case, "
                  "a score lower than its by more than %g" % (reference, TIME_RATIO, SCORE_NOISE))
-        if second_draw is not None:
-            rule += ("; a setting with a second draw (%s) and the reference are judged on both draws pooled, and "
-                     "settings are ranked by their score less the reference's on the same draws"
-                     % os.path.relpath(second_draw, ROOT))
+        if second_run is not None:
+            rule += ("; a setting with a second run (%s) and the reference are judged on both runs pooled, and "
+                     "settings are ranked by their score less the reference's on the same runs"
+                     % os.path.relpath(second_run, ROOT))
     return {"command": "python benchmarks/natural_light.py " + command, "measures": list(CHOICE_MEASURES),
             "rule": rule, "cases": n_cases, "best": best, "best_config": config,
             "best_gmm": GMM if gmm is None else gmm,     # defaults: the build's structure
@@ -491,7 +376,7 @@ def choose(root=SWEEP, n_cases=None, command="--choose", reference=None, second_
             "overruled": barred,
             "fewer_wins": short,
             "too_slow": slow,
-            # settings run on fewer cases (before the validation set grew) are not scored
+            # settings run on fewer cases are not scored
             "incomplete": {k: v["cases"] for k, v in scores.items() if k not in complete}}
 
 
@@ -502,13 +387,13 @@ def write_choice(choice, path) -> None:
 
 def choice_table(choice) -> str:
     """The settings of a :func:`choose` result as a markdown table, best first (by
-    the margin to the reference on the same draws, where there is one)."""
+    the margin to the reference on the same runs, where there is one)."""
     lines = ["| setting | cases | seconds | " + " | ".join("%s: median ratio, wins" % k for k in CHOICE_MEASURES)
              + " | score | against the best, case by case: lower / higher (%s) |" % ", ".join(CHOICE_MEASURES),
              "|---|---|---|" + "---|" * (len(CHOICE_MEASURES) + 2)]
     for name, v in sorted(choice["settings"].items(), key=lambda kv: kv[1]["margin"]):
         paired = v.get("against_best")
-        label = name + (" (%d draws)" % v["draws"] if v["draws"] > 1 else "") + (
+        label = name + (" (%d runs)" % v["runs"] if v["runs"] > 1 else "") + (
             " (overruled)" if name in choice.get("overruled", {}) else
             " (fewer wins)" if name in choice.get("fewer_wins", {}) else
             " (too slow for its gain)" if name in choice.get("too_slow", {}) else "")
@@ -519,7 +404,6 @@ def choice_table(choice) -> str:
     return "\n".join(lines)
 
 
-DOCS = os.path.join(ROOT, "docs")
 #: the report's picture: one case per GMM cluster of the report set, under different probes
 FIGURE_CASES = [("light-brown-fabric", "grace"), ("blue-acrylic", "pisa"), ("orange-paint", "blouberg_sunrise_2_1k"),
                 ("gold-metallic-paint", "venice_sunset_1k")]
@@ -532,7 +416,6 @@ def write_report(folder, docs=DOCS) -> str:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from experiments_report import _tonemap
     cases = []
     for material, probe in FIGURE_CASES:
         found = {m: glob.glob(os.path.join(folder, "report-%s-%s-sphere-%s*.npz" % (m, material, probe)))
@@ -555,9 +438,9 @@ def write_report(folder, docs=DOCS) -> str:
             pair = f["dsbrdf"][relit].astype(np.float64)
             adam = f["principled-adam"][relit].astype(np.float64)[1]
             ref = np.percentile(pair[0], 99)
-            row[3].imshow(_tonemap(np.concatenate([pair[0], pair[1]], axis=1), ref))
+            row[3].imshow(tonemap(np.concatenate([pair[0], pair[1]], axis=1), ref))
             row[3].set_title("%s relit (%s): truth | this tool" % (material, relit), fontsize=7)
-            row[4].imshow(_tonemap(adam, ref))
+            row[4].imshow(tonemap(adam, ref))
             row[4].set_title("principled + Adam", fontsize=7)
             for ax in row:
                 ax.axis("off")
@@ -565,8 +448,9 @@ def write_report(folder, docs=DOCS) -> str:
         fig.savefig(os.path.join(docs, "natural_light.png"), dpi=90)
         plt.close(fig)
     md = ("# Natural light: recovery against doing nothing (report set)\n\n"
-          "Generated by `python benchmarks/natural_light.py --set report --report` from `%s`; the settings were "
-          "chosen on the validation set (README, *Natural light*).\n\n" % os.path.relpath(folder, ROOT)
+          "Generated by `python benchmarks/natural_light.py --set report --report` from `%s` (per-case results, "
+          "not kept in the repository); the settings were chosen on the validation set (README, *Natural "
+          "light*).\n\n" % os.path.relpath(folder, ROOT)
           + ("![maps and relit images](natural_light.png)\n\n*Each row: the true map, the map this tool "
              "recovered and the one principled + Adam recovered (log radiance, the same colour scale), then the "
              "material relit under another probe: truth and this tool side by side, then principled + Adam (each "
@@ -574,6 +458,16 @@ def write_report(folder, docs=DOCS) -> str:
     with open(os.path.join(docs, "natural_light.md"), "w") as f:
         f.write(md)
     return md
+
+
+def run_folder(which, truth_samples=1, exposure=1.0, photons=None, fits_from=None) -> str:
+    """The folder of a set's runs (one setting a folder in it): ``<set>`` with
+    ``-truth<S>``, ``-exposure<E>``, ``-photons<N>`` for those measures, under
+    ``fits-<model file>/`` for leave-one-out models from another build's fits."""
+    fits = ("fits-" + os.path.splitext(os.path.basename(fits_from))[0]) if fits_from else ""
+    return os.path.join(OUT, fits, which + ("-truth%d" % truth_samples if truth_samples > 1 else "")
+                        + ("-exposure%g" % exposure if exposure != 1.0 else "")
+                        + ("-photons%g" % photons if photons else ""))
 
 
 def main(argv=None):
@@ -590,17 +484,17 @@ def main(argv=None):
     ap.add_argument("--summary", action="store_true", help="only print the tables of finished cases")
     ap.add_argument("--report", action="store_true", help="write docs/natural_light.{md,png} from the results")
     ap.add_argument("--choose", action="store_true",
-                    help="score every validation setting run so far and write the choice to %s" %
-                         os.path.relpath(CHOICE, ROOT))
-    ap.add_argument("--choose-gmm", action="store_true",
-                    help="score every setting under validation-interior/ (GMM structures and weights) and write the "
-                         "choice to %s" % os.path.relpath(GMM_CHOICE, ROOT))
+                    help="score every validation setting run so far against the reference and write the choice "
+                         "to %s" % os.path.relpath(CHOICE, ROOT))
+    ap.add_argument("--reference", default=REFERENCE, metavar="SETTING",
+                    help="with --choose: the guards' reference, the folder of the shipped code's validation run "
+                         "(default %s)" % REFERENCE)
     ap.add_argument("--truth-samples", type=int, default=1, metavar="S",
                     help="render each case's truth from the probe integrated over each texel as S x S directions "
                          "(default 1: the texel centres); results under <set>-truth<S>/")
     ap.add_argument("--exposure", type=float, default=1.0, metavar="E",
                     help="each image times E (default 1): the same cases again with only rounding changed, "
-                         "a second draw of the optimiser's path; results under <set>-exposure<E>/")
+                         "a second run of the optimiser's path; results under <set>-exposure<E>/")
     ap.add_argument("--photons", type=float, default=None, metavar="N",
                     help="shot noise: each image as photon counts, N at its mean pixel (Poisson); results under "
                          "<set>-photons<N>/")
@@ -611,35 +505,18 @@ def main(argv=None):
     ap.add_argument("--against", metavar="SETTING",
                     help="with --summary: this setting's scores and, case by case, against SETTING (a folder "
                          "name beside it)")
-    ap.add_argument("--reference", default=SHIPPED_SETTING, metavar="SETTING",
-                    help="with --choose-gmm: the wins guard's reference, a folder under validation-interior/ "
-                         "(default the shipped code's, %s)" % SHIPPED_SETTING)
     ap.add_argument("--fits-from", default=None, metavar="MODEL",
                     help="leave-one-out models from the full fits stored in this model file (a build-model "
                          "--out) instead of the shipped one's (validation only); results under "
-                         "trial-<file name>/, apart from the settings the rule chooses among")
+                         "fits-<file name>/, apart from the settings the rule chooses among")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
-    if args.choose_gmm:
-        choice = choose(os.path.join(OUT, "validation" + PIXELS), command="--choose-gmm", reference=args.reference,
-                        second_draw=os.path.join(OUT, "validation" + PIXELS + "-exposure%g" % SECOND_DRAW_EXPOSURE))
-        write_choice(choice, GMM_CHOICE)
-        print(choice_table(choice))
-        print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(GMM_CHOICE, ROOT)))
-        return
     if args.choose:
-        choice = choose()
-        shipped = SWEEP_SHIPPED
-        if os.path.isdir(shipped):
-            choice["shipped"] = dict(setting_scores(shipped), folder=os.path.relpath(shipped, ROOT))
+        choice = choose(run_folder("validation"), reference=args.reference,
+                        second_run=run_folder("validation", exposure=SECOND_RUN_EXPOSURE))
         write_choice(choice, CHOICE)
         print(choice_table(choice))
-        if "shipped" in choice:
-            v = choice["shipped"]
-            print("| **shipped code** (%s) | %d | %.0f | %s | %.3f |" % (
-                v["folder"], v["cases"], v["seconds_median"],
-                " | ".join("%.2f×, %d" % (v[k]["median_ratio"], v[k]["wins"]) for k in CHOICE_MEASURES), v["score"]))
         print("\nchosen: %s -> %s" % (choice["best"], os.path.relpath(CHOICE, ROOT)))
         return
     config = parse_config(args.config)
@@ -660,12 +537,9 @@ def main(argv=None):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
     if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
         sys.exit("--photons must be a finite number > 0, got %r" % args.photons)
-    trial = ("trial-" + os.path.splitext(os.path.basename(args.fits_from))[0]) if args.fits_from else ""
-    out = os.path.join(OUT, trial, args.set + PIXELS + ("-truth%d" % args.truth_samples if args.truth_samples > 1 else "")
-                       + ("-exposure%g" % args.exposure if args.exposure != 1.0 else "")
-                       + ("-photons%g" % args.photons if args.photons else ""), name)
+    out = os.path.join(run_folder(args.set, args.truth_samples, args.exposure, args.photons, args.fits_from), name)
     if not (args.summary or args.report):
-        if not os.path.exists(os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")):
+        if not have_data(args.data):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         adam = () if args.adam is None else (args.adam or ADAM_METHODS)     # --adam alone: both
         run_on_cluster(cases(args.set, config, adam, args.gmm, args.truth_samples, args.materials,

@@ -2,7 +2,7 @@
 
 The prior weights are shared by every kind of light, and a point light sees a
 narrow band of theta_d: the reflectance prior carries more of the answer there.
-This runs the validation materials (``natural_light.VALIDATION_MATERIALS``)
+This runs the validation materials (``benchmark_cases.VALIDATION_MATERIALS``)
 under a point light at two angles, with a GMM weight and the leave-one-out
 models' GMM structure (default: the shipped ones), and prints Eq. 20 (paper)
 beside the model's mean material (psi = 0).
@@ -11,8 +11,11 @@ beside the model's mean material (psi = 0).
     .venv/bin/python benchmarks/point_validation.py --gmm full:2:0.01 --w-gmm 100
     .venv/bin/python benchmarks/point_validation.py --config light_gmm_volume=0   # the GMM without its volume terms
 
-Adds its setting to ``benchmarks/results/point_validation.json`` (``settings``,
-named like ``natural_light.setting_name``).
+Adds its setting's summary (cases better than the mean material, median and
+worst ratio to it, largest direction error) to
+``benchmarks/results/point_validation.json`` (``settings``, named by
+:func:`~mi_dsbrdf.evaluation.benchmark_cases.setting_name`) and its cases to
+``out/point_validation/<setting>.json``.
 """
 from __future__ import annotations
 
@@ -23,10 +26,13 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from experiments import CACHE, DATA
-from natural_light import VALIDATION_MATERIALS, parse_config, setting_name
+from mi_dsbrdf.evaluation.benchmark_cases import (CACHE, DATA, OUT as OUT_ROOT, RESULTS, VALIDATION_MATERIALS,
+                                                  parse_config, setting_name)
 
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "point_validation.json")
+#: the settings' summaries (the README and Config's docs quote it)
+SUMMARY = os.path.join(RESULTS, "point_validation.json")
+#: each setting's cases, <setting>.json
+OUT = os.path.join(OUT_ROOT, "point_validation")
 ANGLES = (20, 60)
 
 
@@ -69,10 +75,13 @@ def main(argv=None):
     print("%s: BRDF (paper) better than the mean material in %d of %d, median ratio %.2f, worst %.2f, "
           "direction error at most %.2f deg" % (name, summary["wins"], len(rows), summary["median_ratio"],
                                                 summary["worst_ratio"], summary["direction_error_max_deg"]))
-    old = json.load(open(OUT)) if os.path.exists(OUT) else {}
+    os.makedirs(OUT, exist_ok=True)
+    with open(os.path.join(OUT, name + ".json"), "w") as f:
+        json.dump(rows, f, indent=1, sort_keys=True)
+    old = json.load(open(SUMMARY)) if os.path.exists(SUMMARY) else {}
     settings = old.get("settings", {})
-    settings[name] = {"summary": summary, "rows": rows}
-    with open(OUT, "w") as f:
+    settings[name] = {"summary": summary}
+    with open(SUMMARY, "w") as f:
         json.dump({"command": "python benchmarks/point_validation.py [--gmm S] [--w-gmm W] [--config k=v ...]",
                    "settings": settings}, f, indent=1, sort_keys=True)
 

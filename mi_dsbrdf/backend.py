@@ -129,7 +129,7 @@ def one_blas_thread() -> None:
     """One BLAS thread in worker processes started after this call (they inherit
     the environment), unless the user set a count: with several worker processes
     already filling the cores, OpenBLAS threads of each spin against the others'
-    (full fits ran 2-4x slower here, two workers on two cores)."""
+    (full fits run 2-4x slower, two workers on two cores)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
 
@@ -147,10 +147,8 @@ def keep_freed_memory() -> None:
     """Let glibc keep up to TOP_PAD_BYTES of freed heap memory for reuse (once per
     process; nothing on other C libraries). Inference allocates and frees
     arrays of a few MB thousands of times (Jacobian columns, images, their
-    products); by default glibc returned them to the kernel and the next one
-    page-faulted in again: a point-light Jacobian took 12 ms, 3 ms with this
-    (the 128 px point-light case of ``benchmarks/inference_cases.py``: ~9 s ->
-    ~6 s, before the light search got cheaper)."""
+    products); by default glibc returns them to the kernel and the next one
+    page-faults in again (a point-light Jacobian: 12 ms, 3 ms with this)."""
     global _allocator_tuned
     if _allocator_tuned:
         return
@@ -171,7 +169,7 @@ def single_blas_thread(function):
     Inference alternates Dr.Jit kernels (on Dr.Jit's own thread pool) with BLAS
     products of the transport, which are bound by memory bandwidth: a second
     BLAS thread does not speed them up, and its spinning against Dr.Jit's
-    threads made a whole recovery 1.5x slower here (31 s against 20 s)."""
+    threads makes a whole recovery about 1.5x slower."""
     from threadpoolctl import threadpool_limits
 
     @functools.wraps(function)

@@ -32,7 +32,14 @@ class ModelError(MiDsbrdfError, ValueError):
 
 
 class ConfigError(MiDsbrdfError, ValueError):
-    """An inference setting (:class:`~mi_dsbrdf.config.Config`) is out of range."""
+    """An inference setting (:class:`~mi_dsbrdf.config.Config`) is out of range.
+
+    ``field``: the Config field the message begins with (None for other
+    messages), so that the command line can name the option instead."""
+
+    def __init__(self, message, field=None):
+        super().__init__(message)
+        self.field = field
 
 
 class InputError(MiDsbrdfError, ValueError):

@@ -1,11 +1,8 @@
 import os
-import sys
 
 import pytest
 
 import mi_dsbrdf  # noqa: F401  (variant + plugins)
-
-sys.path.insert(0, os.path.dirname(__file__))
 
 DATA = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
 REQUIRE_DATA = os.environ.get("MI_DSBRDF_REQUIRE_DATA") == "1"

@@ -103,6 +103,12 @@ def test_api_bad_arguments_are_clear_errors(directional):
         mi_dsbrdf.recover(42, img)
     with pytest.raises(mi_dsbrdf.InputError, match="config must be"):
         mi_dsbrdf.recover(str(d / "scene.xml"), img, config={"max_rounds": 2})
+    # a preset's name stands for its Config; an unknown name is a one-line error listing the names
+    with pytest.raises(mi_dsbrdf.ConfigError, match="unknown preset 'quick': give one of default, fast$"):
+        mi_dsbrdf.recover(str(d / "scene.xml"), img, config="quick")
+    for name in ("default", "fast"):               # accepted: the film check comes next
+        with pytest.raises(mi_dsbrdf.InputError, match="is 32x16 but the scene's film"):
+            mi_dsbrdf.recover(str(d / "scene.xml"), img[:16], config=name)
     with pytest.raises(mi_dsbrdf.InputError, match="uint8 array"):
         mi_dsbrdf.recover(str(d / "scene.xml"), (np.clip(img, 0, 1) * 255).astype(np.uint8))
     with pytest.raises(mi_dsbrdf.InputError, match="is 32x16 but the scene's film is 32x32"):
@@ -138,7 +144,7 @@ def test_photograph_of_a_sphere_recovered_end_to_end(photo, tmp_path, capsys):
     d, img, mask, _ = photo
     out = tmp_path / "out"
     assert main(["recover", "--sphere", "--image", str(d / "photo.exr"), "--mask", str(d / "mask.png"),
-                 "--light", "directional", "--out", str(out), "--rounds", "2", "--iters", "15"]) == 0
+                 "--light", "directional", "--out", str(out), "--max-rounds", "2", "--block-iters", "15"]) == 0
     assert "orthographic camera" in capsys.readouterr().out
     light = json.loads((out / "light.json").read_text())
     assert angle(light["direction"], SUN) < 3.0
@@ -187,8 +193,8 @@ def test_spot_light_is_a_scene_error(directional, tmp_path, capsys):
 
 def test_output_folders_never_lose_anything(directional, tmp_path, capsys, monkeypatch):
     d, img = directional
-    args = ["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"), "--rounds", "1",
-            "--iters", "3"]
+    args = ["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"), "--max-rounds", "1",
+            "--block-iters", "3"]
     # --out naming a file, or a folder that cannot be made
     (tmp_path / "file").write_text("mine")
     assert main(args + ["--out", str(tmp_path / "file")]) == 1
@@ -232,15 +238,15 @@ def test_bad_masks_and_too_few_pixels(directional, tmp_path, capsys):
     one_line_error(capsys, "mask", "NaN/Inf", "(7, 5)")
     assert main(base + ["--mask", str(tmp_path / "missing.png"), "--out", str(tmp_path / "o")]) == 1
     one_line_error(capsys, "mask", "does not exist")
-    # a 3-pixel mask once gave a confident light 17 deg off: refused, and nothing is written
+    # a 3-pixel mask gives a confident, wrong light: refused, and nothing is written
     three = np.zeros_like(img)
     three[15:16, 14:17] = 1.0
     write_exr(tmp_path / "three.exr", three)
     assert main(base + ["--mask", str(tmp_path / "three.exr"), "--out", str(tmp_path / "o")]) == 1
     one_line_error(capsys, "only 3 usable pixels", "at least 100")
     assert not (tmp_path / "o").exists()
-    assert main(base + ["--rounds", "0", "--out", str(tmp_path / "o")]) == 1
-    one_line_error(capsys, "max_rounds")
+    assert main(base + ["--max-rounds", "0", "--out", str(tmp_path / "o")]) == 1
+    one_line_error(capsys, "--max-rounds must be")
 
 
 def test_relight_in_the_users_own_scene_and_bad_relight_inputs(tmp_path, capsys):
@@ -295,8 +301,8 @@ def test_all_unmeasured_merl_file_is_a_clear_error(tmp_path, capsys):
 
 
 def test_grey_image_with_clipped_highlights_comes_back_grey(directional):
-    """The issue's case: a grey image with its highlight clipped once came back with
-    pure green lobes. The plateau is left out and the lobes start (and stay) grey."""
+    """A grey image with its highlight clipped: the plateau is left out and the
+    lobes start (and stay) grey, not green."""
     d, img = directional
     grey = np.repeat(img.mean(axis=2, keepdims=True), 3, axis=2)
     grey = np.minimum(grey, 0.5 * grey.max())

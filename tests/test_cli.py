@@ -1,4 +1,4 @@
-"""The command line: the demo (the README's main job), relight, and output safety."""
+"""The command line: the demo (the main job), recover's settings, relight, build-model and output safety."""
 import json
 import math
 import subprocess
@@ -13,8 +13,8 @@ from mi_dsbrdf.app.scenes import SCENE_DIR
 
 def test_demo_recovers_and_reports_and_never_overwrites(tmp_path):
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--res", "24", "--map-size", "4x8", "--rounds", "1", "--iters", "3",
-                 "--spp", "16"]) == 0
+    assert main(["demo", "--out", str(out), "--res", "24", "--map-size", "4x8", "--max-rounds", "1",
+                 "--block-iters", "3", "--spp", "16"]) == 0
     report = json.loads((out / "report.json").read_text())
     for key in ("brdf_eq20_paper", "brdf_eq20_cosine", "mean_material_eq20_paper", "illumination_cosine_after_scale",
                 "illumination_paper_after_scale", "constant_map_cosine_after_scale", "constant_map_paper_after_scale",
@@ -54,13 +54,11 @@ def test_render_missing_scene_is_a_clear_error(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
-def recover_args(**given):
-    """The parsed arguments of ``recover`` that cli._config reads: the benchmarked
-    preset, no override, the colour split on; ``given`` replaces any of them."""
-    import argparse
-    args = dict(preset="benchmarked", map_size=None, rounds=None, iters=None, texel_samples=None,
-                start_candidates=None, grey_rounds=None, no_second_route=False, no_colour_split=False)
-    return argparse.Namespace(**dict(args, **given))
+def recover_args(*options):
+    """The parsed arguments of ``recover`` with these options (the default preset
+    and no override without any)."""
+    from mi_dsbrdf.app.cli import parser
+    return parser().parse_args(["recover", "--image", "i.exr", "--out", "o"] + list(options))
 
 
 def test_bad_map_size_is_a_usage_error(tmp_path, capsys):
@@ -68,11 +66,13 @@ def test_bad_map_size_is_a_usage_error(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["recover", "--scene", "s.xml", "--image", "i.exr", "--out", str(tmp_path / "o"), "--map-size", "16by32"])
     assert "HxW" in capsys.readouterr().err
+
+
 def test_the_colour_split_is_on_by_default_and_an_option_of_recover(capsys):
     import pytest
     from mi_dsbrdf.app.cli import _config
-    on = _config(recover_args(no_colour_split=False))
-    off = _config(recover_args(no_colour_split=True))
+    on = _config(recover_args())
+    off = _config(recover_args("--no-colour-split"))
     assert (on.w_chromaticity, on.w_light_colour) == (1.0 / 3.0, 1.0) and on.colour_split
     assert (off.w_chromaticity, off.w_light_colour) == (0, 0) and not off.colour_split
     with pytest.raises(SystemExit):
@@ -80,32 +80,55 @@ def test_the_colour_split_is_on_by_default_and_an_option_of_recover(capsys):
     assert "--no-colour-split" in capsys.readouterr().out
 
 
-def test_start_candidates_is_an_option_of_recover(tmp_path, capsys):
+def test_recover_s_options_are_the_config_fields_and_its_presets_are_default_and_fast(capsys):
+    """Every Config field is an option of recover and demo, named as the field with
+    dashes; --rounds and --iters are aliases of --max-rounds and --block-iters;
+    unset options keep the preset's values."""
+    import dataclasses
+
+    import pytest
+
+    from mi_dsbrdf import PRESETS, Config
     from mi_dsbrdf.app.cli import _config
-    assert _config(recover_args()).start_candidates == 1
-    assert _config(recover_args(start_candidates=2)).start_candidates == 2
-    code = main(["recover", "--sphere", "--light", "envmap", "--image", str(tmp_path / "i.exr"),
-                 "--out", str(tmp_path / "o"), "--start-candidates", "0"])
-    assert code != 0 and "start_candidates" in capsys.readouterr().err
+    assert _config(recover_args()) == Config() == PRESETS["default"]
+    assert _config(recover_args("--preset", "fast")) == PRESETS["fast"] == Config(map_size=(16, 32))
+    given = {"map_size": (8, 16), "max_rounds": 2, "tol": 0.01, "block_iters": 4, "w_gmm": 2.5,
+             "second_route_highlight": None, "grey_texel_samples": None, "map_pairs": 1 << 20}
+    argv = []
+    for name, value in given.items():
+        text = "x".join(map(str, value)) if isinstance(value, tuple) else "none" if value is None else str(value)
+        argv += ["--" + name.replace("_", "-"), text]
+    assert _config(recover_args(*argv)) == dataclasses.replace(Config(), **given)
+    assert _config(recover_args("--rounds", "5", "--iters", "7")) == Config(max_rounds=5, block_iters=7)
+    for command in ("recover", "demo"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        out = capsys.readouterr().out
+        for f in dataclasses.fields(Config):
+            assert "--" + f.name.replace("_", "-") in out, f.name
+        assert "--rounds" in out and "--iters" in out
+    for gone in ("--start-candidates", "--grey-rounds"):
+        with pytest.raises(SystemExit):
+            main(["recover", "--image", "i.exr", "--out", "o", gone, "1"])
+        assert "unrecognized arguments" in capsys.readouterr().err
 
 
-def test_grey_rounds_is_an_option_of_recover(tmp_path, capsys):
-    """--grey-rounds N sets Config.grey_rounds (default None: the passes' rounds);
-    a negative N is a one-line error naming the setting."""
-    from mi_dsbrdf.app.cli import _config
-    assert _config(recover_args()).grey_rounds is None
-    assert _config(recover_args(grey_rounds=0)).grey_rounds == 0
-    code = main(["recover", "--sphere", "--light", "envmap", "--image", str(tmp_path / "i.exr"),
-                 "--out", str(tmp_path / "o"), "--grey-rounds", "-1"])
-    err = capsys.readouterr().err
-    assert code != 0 and "grey_rounds" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+def test_a_bad_setting_is_a_one_line_error_naming_the_option_as_typed(tmp_path, capsys):
+    base = ["recover", "--sphere", "--image", str(tmp_path / "i.exr"), "--out", str(tmp_path / "o")]
+    for option, value in (("--max-rounds", "0"), ("--rounds", "0"), ("--iters", "0"), ("--map-size", "1x8"),
+                          ("--texel-samples", "0"), ("--w-gmm", "-1"), ("--second-route-highlight", "0")):
+        assert main(base + [option, value]) == 1
+        err = capsys.readouterr().err
+        assert err.startswith("mi-dsbrdf: %s " % option), err
+        assert "_" not in err.split(" ")[1] and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
 
 
 def test_the_second_route_is_on_by_default_and_no_second_route_turns_it_off(capsys):
     import pytest
     from mi_dsbrdf.app.cli import _config
     assert _config(recover_args()).second_route_highlight == 2.0
-    assert _config(recover_args(no_second_route=True)).second_route_highlight is None
+    assert _config(recover_args("--no-second-route")).second_route_highlight is None
     with pytest.raises(SystemExit):
         main(["recover", "--help"])
     assert "--no-second-route" in capsys.readouterr().out
@@ -125,36 +148,15 @@ def test_build_model_refuses_to_overwrite_and_names_bad_sources(tmp_path, capsys
     assert not (tmp_path / "m.npz").exists()
 
 
-def test_build_model_names_a_bad_fit_anchor(tmp_path, capsys):
-    out = tmp_path / "m.npz"
-    for bad in (["--fit-anchor", "-1"], ["--fit-anchor", "nan"], ["--fit-anchor", "0.003", "--fit-anchor-lobes", "3"]):
-        assert main(["build-model", "--merl", str(tmp_path), "--out", str(out)] + bad) == 1
-        err = capsys.readouterr().err
-        assert "--fit-anchor" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
-    assert not out.exists()
-
-
-def test_build_model_names_a_bad_curve_to_complete(tmp_path, capsys):
-    """--complete-unseen LOBE:CURVE: an unknown curve is a one-line error before any fit."""
-    out = tmp_path / "m.npz"
-    for bad in (["3:gamma"], ["0:gamma", "1:sigma"]):
-        assert main(["build-model", "--merl", str(tmp_path), "--out", str(out), "--complete-unseen"] + bad) == 1
-        err = capsys.readouterr().err
-        assert "lobe:curve" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
-    assert not out.exists()
-
-
 def test_a_builds_recorded_command_repeats_the_build(tmp_path, monkeypatch):
     """build_info's command, run, asks build_model for the same build: every
-    non-default option is in it (--fits-from, --k and --gmm were once left out)."""
-    import dataclasses
+    non-default option is in it (--fits-from, --k and --gmm)."""
     import shlex
 
     import pytest
 
     from mi_dsbrdf.app import cli
     from mi_dsbrdf.model.build import GMM, build_command
-    from mi_dsbrdf.model.fit_problem import OBJECTIVE
     calls = []
 
     class Called(Exception):
@@ -166,10 +168,8 @@ def test_a_builds_recorded_command_repeats_the_build(tmp_path, monkeypatch):
 
     monkeypatch.setattr(cli, "build_model", build_model)
     monkeypatch.chdir(tmp_path)
-    anchored = dataclasses.replace(OBJECTIVE, anchor_weight=0.003, anchor_lobes=(1, 2))
-    builds = [dict(k=7, exclude=("pvc", "teflon"), fits_from="old.npz", gmm="diag:5:0.01", objective=OBJECTIVE,
-                   complete=["0:gamma"]),
-              dict(k=10, exclude=(), fits_from=None, gmm=GMM, objective=anchored, complete=True)]
+    builds = [dict(k=7, exclude=("pvc", "teflon"), fits_from="old.npz", gmm="diag:5:0.01"),
+              dict(k=10, exclude=(), fits_from=None, gmm=GMM)]
     for build in builds:
         command = build_command("merl.npz", "m.npz", **build)
         with pytest.raises(Called):
@@ -178,4 +178,3 @@ def test_a_builds_recorded_command_repeats_the_build(tmp_path, monkeypatch):
         assert (got["source"], got["out"]) == ("merl.npz", "m.npz")
         assert got["k"] == build["k"] and tuple(got["exclude"]) == build["exclude"]
         assert got["fits_from"] == build["fits_from"] and got["gmm"] == build["gmm"]
-        assert got["objective"] == build["objective"] and got["complete"] == build["complete"]

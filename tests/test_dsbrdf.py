@@ -143,8 +143,8 @@ def test_gradients_sample_and_pdf_finite_at_extremes(kappa, gamma, tmp_path):
 @pytest.mark.parametrize("gamma", [1e4, 1e6])
 def test_direction_gradients_finite_at_the_sharpest_peak(gamma):
     """kappa at its bound, gamma up to its bound: d eval / d theta_o stays finite from
-    the mirror direction out to 3 deg (at kappa 85 it was NaN within 0.26 deg:
-    e^kappa * kappa * gamma overflowed float32 in the chain rule), and the
+    the mirror direction out to 3 deg (e^kappa * kappa * gamma overflows float32 in
+    a naive chain rule: NaN within 0.26 deg at kappa 85), and the
     derivative is exact where the formula's conditioning allows."""
     bsdf = mi.load_dict({"type": "dsbrdf", "lobes": 1, "kappa_0": "60", "gamma_0": "%g" % gamma,
                          "chromaticity_0": "0.25 0.25 0.5"})

@@ -8,7 +8,6 @@ from mi_dsbrdf import Material
 from mi_dsbrdf.model import fit_problem, fitting, samples
 from mi_dsbrdf.brdf.measured import MeasuredBRDF, eval_nbrdf, load_nbrdf_weights
 from mi_dsbrdf.evaluation.metrics import log_rmse
-from mi_dsbrdf.brdf.chromaticity import chroma_logits
 
 # a coarse slice of the grid keeps each fit to a few seconds
 SUBSET = dict(theta_d_step=6, phi_d_step=30)
@@ -151,61 +150,3 @@ def test_fit_keeps_a_dark_floor_under_a_sharp_peak():
         got = fit.material.eval(th, np.full_like(th, td))
         np.testing.assert_allclose(got, np.broadcast_to(floor, got.shape), rtol=0.2)
     assert fit.error < 0.2, fit.error
-
-
-def test_anchor_settles_what_the_data_do_not_see():
-    """A Lambertian BRDF needs one flat lobe: unanchored, the flat lobe's gamma and the
-    faded lobes' kappa rest on their bounds, where the data barely see them. The anchor
-    pulls them off the bounds and holds the faded lobes' gamma near ANCHORS, for about
-    1 % of error on a perfectly flat BRDF; a fit whose lobes all matter keeps its error."""
-    albedo = np.array([0.5, 0.4, 0.3])
-    s = samples.samples_from_function(lambda th, td, pd: np.broadcast_to(albedo / np.pi, (th.size, 3)),
-                                      samples.grid_subset(**SUBSET), "lambert")
-    free = fitting.fit_full(s, objective=fit_problem.FitObjective(anchor_weight=0.0)).variables
-    fit = fitting.fit_full(s, objective=fit_problem.FitObjective(anchor_weight=0.003))
-    held = fit.variables
-    floor_gamma = math.log(fit_problem.OBJECTIVE.broad_gamma_min)
-    np.testing.assert_allclose(free[0, 1], floor_gamma, atol=0.01)                  # on the bounds
-    np.testing.assert_allclose(free[1:, 0], fit_problem.LOG_KAPPA_BOUNDS[0], atol=0.01)
-    assert held[0, 1].min() > floor_gamma + 2.0 and held[1:, 0].min() > fit_problem.LOG_KAPPA_BOUNDS[0] + 2.0
-    assert np.abs(held[1:, 1] - np.array(fit_problem.ANCHORS)[1:, 1, None]).max() < 1.0
-    assert fit.error < 0.02 and fit.error_cosine < 0.002, (fit.error, fit.error_cosine)
-    np.testing.assert_allclose(held[0, 0], free[0, 0], atol=0.05)                    # the albedo stays
-    # every lobe of a known material matters: the anchor leaves its fit accurate
-    truth = known_material()
-    ks = samples.samples_from_function(lambda th, td, pd: truth.eval(th, td), samples.grid_subset(**SUBSET))
-    known = fitting.fit_full(ks, objective=fit_problem.FitObjective(anchor_weight=0.003))
-    assert known.error < 3e-3 and known.error_cosine < 3e-3, (known.error, known.error_cosine)
-
-
-def test_unseen_ranges_are_wide_where_the_data_do_not_see_a_value():
-    """A Lambertian BRDF measured with 5 % noise, fitted with three lobes: the flat
-    lobe's kappa (its albedo) is seen, a narrow range around the fit; the faded
-    lobes' gamma are not, and their ranges span most of the fit's bounds; a faded
-    lobe's kappa may fall to its bound but not rise far (the lobe would show).
-    Moving a value to its range's end raises the fit's objective by about the
-    tolerance, past it by more."""
-    albedo = np.array([0.5, 0.4, 0.3])
-    rng = np.random.default_rng(0)
-    s = samples.samples_from_function(
-        lambda th, td, pd: albedo / np.pi * np.exp(rng.normal(0, 0.05, (th.size, 3))),
-        samples.grid_subset(**SUBSET), "lambert")
-    fit = fitting.fit_full(s)
-    ctrl, chroma = fit.variables, fit.material.chromaticity
-    lower, upper = fitting.unseen_ranges(s, ctrl, chroma)
-    assert np.all(lower <= ctrl) and np.all(ctrl <= upper)
-    assert (upper - lower)[0, 0].max() < 0.1                                     # the albedo: seen
-    gamma_span = fit_problem.LOG_GAMMA_BOUNDS[1] - fit_problem.LOG_GAMMA_BOUNDS[0]
-    assert (upper - lower)[1:, 1].min() > 0.6 * gamma_span                        # faded lobes' gamma
-    np.testing.assert_allclose(lower[1:, 0], fit_problem.LOG_KAPPA_BOUNDS[0])
-    assert np.all(upper[1:, 0] < -2.0)                                          # a lobe of kappa e^-2 shows
-    problem = fit_problem.FitProblem(s, 3)
-    z = chroma_logits(chroma)
-    cost0 = float(np.sum(problem.residuals(ctrl, z)[0] ** 2))
-
-    def rise(j, v):
-        x = ctrl.copy()
-        x[j] = v
-        return float(np.sum(problem.residuals(x, z)[0] ** 2)) / cost0 - 1.0
-    j = (1, 0, 3)                                                               # a faded lobe's kappa
-    assert rise(j, upper[j]) <= fitting.UNSEEN_TOLERANCE < rise(j, upper[j] + 0.5)

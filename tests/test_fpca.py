@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf.brdf.curves import spline_matrix
-from mi_dsbrdf.model.fpca import complete_unseen, fpca, gram_matrix, l2_inner
+from mi_dsbrdf.model.fpca import fpca, gram_matrix, l2_inner
 
 
 def training_curves(M=30, seed=0):
@@ -50,29 +50,3 @@ def test_fpca_is_deterministic_and_checks_shapes():
         fpca(np.zeros((5, 3, 6)))
     with pytest.raises(ValueError, match="at least 2"):
         fpca(X[:1])
-
-
-def test_complete_unseen_moves_only_unseen_values_towards_the_low_rank_model():
-    """Values displaced from four-factor curves come back to them when their ranges
-    allow (unseen), stay where the fits put them when the ranges are points
-    (seen), and never leave their ranges; the completed curves are again (almost)
-    four-dimensional, where the displaced ones spread variance over many bases."""
-    X = training_curves(M=40, seed=2)
-    rng = np.random.default_rng(5)
-    displaced = X.copy()
-    hide = rng.random(X.shape) < 0.08
-    displaced[hide] += rng.choice([-6.0, 6.0], size=hide.sum())          # a bound the fit rested on
-    lower, upper = displaced.copy(), displaced.copy()
-    lower[hide], upper[hide] = -20.0, 20.0                              # unseen: any value
-    completed, iterations = complete_unseen(displaced, lower, upper, 4)
-    assert np.all(completed >= lower) and np.all(completed <= upper)
-    np.testing.assert_array_equal(completed[~hide], displaced[~hide])
-    assert np.abs(completed[hide] - X[hide]).max() < 0.05, np.abs(completed[hide] - X[hide]).max()
-    assert fpca(displaced).explained[3] < 0.9 < 0.999 < fpca(completed).explained[3]
-    # a range that stops short of the low-rank value holds the value at its end (censored, not free)
-    upper2 = upper.copy()
-    i = tuple(np.argwhere(hide & (displaced < X))[0])
-    upper2[i] = displaced[i] + 1.0
-    held, _ = complete_unseen(displaced, lower, upper2, 4)
-    assert held[i] == upper2[i]
-    assert 1 <= iterations <= 3000

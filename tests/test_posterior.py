@@ -26,7 +26,7 @@ def test_likelihood_gradient_and_stability():
     v, g = log_likelihood_terms(model, obs, mask, offset=1e-3)
     fd = finite_differences(lambda m: log_likelihood_terms(m, obs, mask, 1e-3)[0], model)
     np.testing.assert_allclose(g, fd, rtol=1e-4, atol=1e-6)
-    # a wider kink (Config.likelihood_kink): its own gradient, and a smaller cost (residuals below it count less)
+    # a wider kink than likelihood.KINK: its own gradient, and a smaller cost (residuals below it count less)
     vk, gk = log_likelihood_terms(model, obs, mask, 1e-3, kink=0.05)
     fd = finite_differences(lambda m: log_likelihood_terms(m, obs, mask, 1e-3, kink=0.05)[0], model)
     np.testing.assert_allclose(gk, fd, rtol=1e-4, atol=1e-6)
@@ -149,7 +149,7 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences():
         if not seen[idx[:2]]:
             continue
         # a step of 1e-3 in log L: at 1e-4 the float32 transport's rounding (about 1e-7 of
-        # each pixel) was 0.25 % of the difference with one BLAS build (OpenBLAS of numpy 2.4)
+        # each pixel) is 0.25 % of the difference with some BLAS builds
         e = np.zeros_like(x)
         e[idx] = 1e-3
         fd = (post.illumination_terms(x + e, T, seen, bins)[0] - post.illumination_terms(x - e, T, seen, bins)[0]) / 2e-3

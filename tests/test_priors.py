@@ -83,7 +83,7 @@ def test_tied_covariance_is_shared_and_finds_the_clusters():
     assert tied.n_parameters("tied") == 1 + 2 * 2 + 3 < full.n_parameters("full")
 
 def test_held_out_density_prefers_the_true_clusters():
-    """Leave-one-out -log p (what benchmarks/gmm_selection.py scores) is lowest for
+    """Leave-one-out -log p (:func:`held_out_nll`) is lowest for
     the three clusters the data has."""
     X = three_clusters()[::3]                       # 60 points, 20 per cluster
     score = {c: held_out_nll(X, c, n_init=2).mean() for c in (1, 2, 3)}

@@ -34,7 +34,7 @@ def test_recover_writes_the_result_directory(case, tmp_path):
     d, img = case
     out = tmp_path / "out"
     assert main(["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"), "--out", str(out),
-                 "--rounds", "2", "--iters", "20"]) == 0
+                 "--max-rounds", "2", "--block-iters", "20"]) == 0
     for f in ("material.json", "light.json", "log.json", "scene.xml", "input.png", "rerender.png", "residual.png",
               "material.png"):
         assert (out / f).stat().st_size > 0, f
@@ -103,7 +103,7 @@ def test_point_light_and_envmap_scenes(tmp_path):
     write_exr(tmp_path / "point.exr", np.array(mi.render(mi.load_file(str(tmp_path / "truth.xml")), spp=64, seed=0)))
     out = tmp_path / "out_point"
     assert main(["recover", "--scene", str(tmp_path / "point.xml"), "--image", str(tmp_path / "point.exr"),
-                 "--out", str(out), "--rounds", "2", "--iters", "15"]) == 0
+                 "--out", str(out), "--max-rounds", "2", "--block-iters", "15"]) == 0
     light = json.loads((out / "light.json").read_text())
     truth_dir = np.array([2.5, 2.0, 3.0]) / np.linalg.norm([2.5, 2.0, 3.0])
     assert light["type"] == "point" and math.degrees(math.acos(min(1.0, np.dot(light["direction"], truth_dir)))) < 3
@@ -121,7 +121,7 @@ def test_point_light_and_envmap_scenes(tmp_path):
     write_exr(tmp_path / "torus.exr", img)
     out = tmp_path / "out_torus"
     assert main(["recover", "--scene", str(tmp_path / "torus.xml"), "--image", str(tmp_path / "torus.exr"),
-                 "--out", str(out), "--map-size", "4x8", "--rounds", "1", "--iters", "3"]) == 0
+                 "--out", str(out), "--map-size", "4x8", "--max-rounds", "1", "--block-iters", "3"]) == 0
     for f in ("illumination.exr", "illumination.png", "scene.xml", "material.png"):
         assert (out / f).stat().st_size > 0, f
     log = json.loads((out / "log.json").read_text())

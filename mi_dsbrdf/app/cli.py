@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
+import re
 import sys
 
 import mitsuba as mi
@@ -15,11 +15,15 @@ from mi_dsbrdf.app.photo import LIGHTS, photo_scene
 from mi_dsbrdf.app.recover import recover_files
 from mi_dsbrdf.app.render import relight, render_to_files
 from mi_dsbrdf.app.scenes import scene_path
-from mi_dsbrdf.config import PRESETS
-from mi_dsbrdf.errors import InputError, MiDsbrdfError
+from mi_dsbrdf.config import PRESETS, Config, field_docs
+from mi_dsbrdf.errors import ConfigError, InputError, MiDsbrdfError
 from mi_dsbrdf.model.build import GMM, build_model
-from mi_dsbrdf.model.fit_problem import OBJECTIVE
 from mi_dsbrdf.model.model_file import SHIPPED
+
+#: the shorter spellings ``recover`` and ``demo`` also accept for a setting: {field: alias}
+ALIASES = {"max_rounds": "--rounds", "block_iters": "--iters"}
+#: the epilog of ``recover`` and ``demo``: the aliases
+ALIAS_TABLE = "aliases:\n" + "".join("  %-10s %s\n" % (a, "--" + f.replace("_", "-")) for f, a in ALIASES.items())
 
 
 def _setup(variant):
@@ -30,15 +34,19 @@ def _setup(variant):
 
 
 def _config(args):
-    """The named preset with the command line's overrides (validated)."""
-    overrides = {k: v for k, v in (("map_size", args.map_size), ("max_rounds", args.rounds),
-                                   ("block_iters", args.iters), ("texel_samples", args.texel_samples),
-                                   ("start_candidates", args.start_candidates), ("grey_rounds", args.grey_rounds))
-                 if v is not None}
-    if args.no_second_route:
+    """The named preset with the command line's overrides (validated). A
+    ConfigError names the option as typed (``--rounds``, ``--max-rounds``)."""
+    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(Config) if hasattr(args, f.name)}
+    if getattr(args, "no_second_route", False):
         overrides["second_route_highlight"] = None
-    cfg = dataclasses.replace(PRESETS[args.preset], **overrides)
-    return cfg.with_colour_split(False) if args.no_colour_split else cfg
+    try:
+        cfg = dataclasses.replace(PRESETS[args.preset], **overrides)
+    except ConfigError as e:
+        if e.field is None or not str(e).startswith(e.field):
+            raise
+        typed = getattr(args, "typed_options", {}).get(e.field) or "--" + e.field.replace("_", "-")
+        raise ConfigError(typed + str(e)[len(e.field):], field=e.field) from None
+    return cfg.with_colour_split(False) if getattr(args, "no_colour_split", False) else cfg
 
 
 def cmd_render(args):
@@ -67,15 +75,8 @@ def cmd_build_model(args):
     out = args.out or SHIPPED
     if os.path.exists(out) and not args.force:
         raise InputError("%s exists; pass --force to replace it" % out)
-    if not (math.isfinite(args.fit_anchor) and args.fit_anchor >= 0):
-        raise InputError("--fit-anchor must be a finite number >= 0, got %r" % args.fit_anchor)
-    if not args.fit_anchor_lobes or any(r not in (0, 1, 2) for r in args.fit_anchor_lobes):
-        raise InputError("--fit-anchor-lobes takes lobes 0, 1 and 2 (0 the broadest), got %s" % args.fit_anchor_lobes)
-    objective = dataclasses.replace(OBJECTIVE, anchor_weight=args.fit_anchor,
-                                    anchor_lobes=tuple(sorted(set(args.fit_anchor_lobes))))
     a = build_model(args.merl, out, k=args.k, exclude=args.exclude, workers=args.workers,
-                    fits_from=args.fits_from, gmm=args.gmm, objective=objective,
-                    complete=False if args.complete_unseen is None else (args.complete_unseen or True))
+                    fits_from=args.fits_from, gmm=args.gmm)
     info = json.loads(str(a["build_info"]))
     print("model with %d bases (%.1f%% of the curve variance), %d library materials, GMM of %d %s components, "
           "hue kappa_h %.3g: %s (%.0f s)" % (
@@ -91,11 +92,43 @@ def _map_size(text):
     return h, w     # its range is checked by Config
 
 
+def _or_none(kind):
+    """An argparse type: ``kind`` of the text, or None for "none"."""
+    def parse(text):
+        return None if text.strip().lower() == "none" else kind(text)
+    parse.__name__ = kind.__name__ + " or none"
+    return parse
+
+
+#: argparse type and metavar of each Config field's annotation
+_KINDS = {"tuple": (_map_size, "HxW"), "int": (int, "N"), "float": (float, "X"),
+          "int | None": (_or_none(int), "N|none"), "float | None": (_or_none(float), "X|none")}
+
+
+def _shown(value) -> str:
+    """A Config value as the command line spells it."""
+    if value is None:
+        return "none"
+    if isinstance(value, tuple):
+        return "x".join(map(str, value))
+    return "%g" % value if isinstance(value, float) else str(value)
+
+
+class _Setting(argparse.Action):
+    """Stores a Config field's value and the option string it was given by (for
+    error messages: ``--rounds 0`` is named ``--rounds``)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        namespace.typed_options = dict(getattr(namespace, "typed_options", {}), **{self.dest: option_string})
+
+
 def cmd_recover(args):
     if (args.scene is None) == (not args.sphere):
         raise InputError("give --scene SCENE.xml, or --sphere for a photograph of a sphere (no scene file)")
     if not args.sphere and (args.light is not None or args.fov is not None):
         raise InputError("--light and --fov describe the scene --sphere builds; a --scene brings its own")
+    config = _config(args)                          # bad settings fail before any work
     scene = args.scene
     if args.sphere:
         scene, circle = photo_scene(args.image, args.mask, light=args.light or "envmap", fov=args.fov,
@@ -104,7 +137,7 @@ def cmd_recover(args):
             circle + ("orthographic" if args.fov is None else "perspective (fov %g)" % args.fov,
                       args.light or "envmap")))
     result = recover_files(scene, args.image, args.out, mask_file=args.mask, force=args.force,
-                           config=_config(args), srgb=args.srgb)
+                           config=config, srgb=args.srgb)
     for line in result.log["needs"]:
         print("  " + line)
     if result.log.get("unseen_texels"):
@@ -120,39 +153,30 @@ def cmd_relight(args):
 
 
 def _config_arguments(p, preset):
-    """--preset and the overrides of its most used settings."""
-    c = PRESETS[preset]
-    p.add_argument("--preset", default=preset, choices=sorted(PRESETS),
-                   help="named inference settings (default %s: map %dx%d, %d rounds, %d iterations)"
-                   % ((preset,) + c.map_size + (c.max_rounds, c.block_iters)))
-    p.add_argument("--map-size", default=None, type=_map_size, help="illumination map HxW (overrides the preset)")
-    p.add_argument("--rounds", type=int, default=None, help="rounds of alternating blocks per pass")
-    p.add_argument("--iters", type=int, default=None, help="Levenberg-Marquardt iterations per reflectance block")
-    p.add_argument("--texel-samples", type=int, default=None, metavar="S",
-                   help="light each map texel from S x S directions in the colour pass (default 2; the start "
-                        "and the grey pass run at the texel centres; 1: centres throughout, sharp highlights come "
-                        "back too broad; see the README, Natural light)")
-    p.add_argument("--start-candidates", type=int, default=None, metavar="N",
-                   help="under a map, run the grey pass from the N best reflectance starts and go on from the "
-                        "lowest posterior (default 1; 2 takes about 1.5x the time and keeps sharp highlights "
-                        "under small bright lights that the coarse start can misjudge; see the README, "
-                        "Natural light)")
-    p.add_argument("--grey-rounds", type=int, default=None, metavar="N",
-                   help="under a map, rounds of the grey pass (default: --rounds); 0 leaves it out: about a "
-                        "quarter faster, level on validation but for one map win in 120 (see the README, "
-                        "Natural light, Options that are not the default)")
-    p.add_argument("--no-second-route", action="store_true",
-                   help="under a map, return the first inference's answer even when it has a highlight (by "
-                        "default such an answer is checked against a second inference whose start is judged "
-                        "on the full map; about 1.5x faster, worse BRDF on glossy materials; see the README, "
-                        "Natural light, The twenty-second session)")
-    p.add_argument("--no-colour-split", action="store_true",
-                   help="under a map, leave the image's colour in the material (the grey-world start) instead "
-                        "of splitting it between light and material by a prior on each (the default; see the "
-                        "README, Natural light, The colour split)")
+    """--preset and one option per Config field, named as the field with dashes
+    (:data:`ALIASES` too); a field left out keeps the preset's value."""
+    g = p.add_argument_group("inference settings (the fields of mi_dsbrdf.Config)")
+    g.add_argument("--preset", default=preset, choices=list(PRESETS),
+                   help="the settings the options below change: %s (default %s)" % (", ".join(
+                       "%s (map %s)" % (n, _shown(c.map_size)) for n, c in PRESETS.items()), preset))
+    docs, c = field_docs(), PRESETS[preset]
+    fields = {f.name for f in dataclasses.fields(Config)}
+
+    def option(m):            # ``field`` -> --field, other ``code`` -> code
+        return "--" + m.group(1).replace("_", "-") if m.group(1) in fields else m.group(1)
+    for f in dataclasses.fields(Config):
+        kind, metavar = _KINDS[str(f.type)]
+        text = re.sub(r"``([^`]*)``", option, docs.get(f.name, "")).replace("%", "%%")
+        names = ["--" + f.name.replace("_", "-")] + ([ALIASES[f.name]] if f.name in ALIASES else [])
+        g.add_argument(*names, dest=f.name, type=kind, metavar=metavar, action=_Setting, default=argparse.SUPPRESS,
+                       help="%s (%s preset: %s)" % (text, preset, _shown(getattr(c, f.name))))
+    g.add_argument("--no-second-route", action="store_true", help="the same as --second-route-highlight none")
+    g.add_argument("--no-colour-split", action="store_true",
+                   help="leave the image's colour in the material: --w-chromaticity 0 --w-light-colour 0")
 
 
-def main(argv=None):
+def parser() -> argparse.ArgumentParser:
+    """The ``mi-dsbrdf`` argument parser (each command's function in ``func``)."""
     ap = argparse.ArgumentParser(prog="mi-dsbrdf", description=__doc__)
     ap.add_argument("--variant", default=None, help="Mitsuba variant (default llvm_ad_rgb)")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -166,11 +190,12 @@ def main(argv=None):
     p.add_argument("--force", action="store_true", help="replace earlier renders of the scene in --out")
     p.set_defaults(func=cmd_render)
 
-    p = sub.add_parser("demo", help="recover a shipped material under a generated sky, and report (main job)")
+    p = sub.add_parser("demo", help="recover a shipped material under a generated sky, and report (main job)",
+                       epilog=ALIAS_TABLE, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="out/demo")
     p.add_argument("--material", default="gold-metallic-paint", help="library material of the observed sphere")
     p.add_argument("--res", type=int, default=64, help="image size (default 64)")
-    _config_arguments(p, "demo")
+    _config_arguments(p, "fast")
     p.add_argument("--spp", type=int, default=256, help="samples per pixel of the renders")
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=cmd_demo)
@@ -186,19 +211,11 @@ def main(argv=None):
                    help="reuse the full per-material fits stored in this model file")
     p.add_argument("--gmm", default=GMM, metavar="STRUCTURE",
                    help="the GMM prior's structure: 'bic' or 'full|diag|tied:components:reg' (default %s)" % GMM)
-    p.add_argument("--fit-anchor", type=float, default=0.0, metavar="W",
-                   help="pull each full fit's control values towards their lobe's anchor with weight W "
-                        "(FitObjective.anchor_weight; default 0, off; the twenty-sixth session tried 0.003)")
-    p.add_argument("--fit-anchor-lobes", type=int, nargs="+", default=[0, 1, 2], metavar="LOBE",
-                   help="the lobes --fit-anchor holds (default 0 1 2)")
-    p.add_argument("--complete-unseen", nargs="*", default=None, metavar="LOBE:CURVE",
-                   help="functional PCA on the fits' control values completed where the measurements do not "
-                        "see them (a faded lobe's gamma, a flat lobe's gamma), not where the fits left them; "
-                        "on every curve, or only on those named, e.g. 0:gamma (lobe 0 the broadest)")
     p.add_argument("--force", action="store_true", help="replace an existing model file")
     p.set_defaults(func=cmd_build_model)
 
-    p = sub.add_parser("recover", help="recover reflectance and illumination from one image")
+    p = sub.add_parser("recover", help="recover reflectance and illumination from one image",
+                       epilog=ALIAS_TABLE, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scene", default=None,
                    help="Mitsuba scene XML (camera, object with a dsbrdf BSDF, light); or use --sphere")
     p.add_argument("--sphere", action="store_true",
@@ -211,7 +228,7 @@ def main(argv=None):
     p.add_argument("--srgb", action="store_true", help="the image is 8-bit sRGB (PNG/JPEG): linearise it")
     p.add_argument("--mask", default=None, help="optional mask image (white = use)")
     p.add_argument("--out", required=True, help="result directory")
-    _config_arguments(p, "benchmarked")
+    _config_arguments(p, "default")
     p.add_argument("--force", action="store_true", help="replace an earlier result directory")
     p.set_defaults(func=cmd_recover)
 
@@ -226,8 +243,11 @@ def main(argv=None):
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.set_defaults(func=cmd_relight)
+    return ap
 
-    args = ap.parse_args(argv)
+
+def main(argv=None):
+    args = parser().parse_args(argv)
     try:
         _setup(args.variant)
         args.func(args)

@@ -24,11 +24,10 @@ import numpy as np
 
 from mi_dsbrdf import load_material
 from mi_dsbrdf.app.io import read_image, save_preview, staged_output, write_exr
-from mi_dsbrdf.app.recover import recover_files
+from mi_dsbrdf.app.recover import recover_files, resolve_config
 from mi_dsbrdf.app.scenes import camera
-from mi_dsbrdf.config import PRESETS, Config
-from mi_dsbrdf.evaluation.experiment import scale_invariant_log_error
-from mi_dsbrdf.evaluation.metrics import material_errors
+from mi_dsbrdf.config import Config
+from mi_dsbrdf.evaluation.metrics import material_errors, scale_invariant_log_error
 from mi_dsbrdf.inference.latlong import direction_to_uv, texel_solid_angles
 from mi_dsbrdf.model.model_file import shipped_model
 from mi_dsbrdf.model.samples import samples_from_function
@@ -95,10 +94,12 @@ def brdf_errors(material, truth) -> dict:
     return material_errors(material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
 
 
-def run(out, material="gold-metallic-paint", res=64, config: Config = PRESETS["demo"], spp=256,
+def run(out, material="gold-metallic-paint", res=64, config: Config | str = "fast", spp=256,
         force=False) -> dict:
-    """Render, recover (with ``config``) and report into the folder ``out`` (written
-    whole at the end, see :func:`~mi_dsbrdf.app.io.staged_output`); returns the report dict."""
+    """Render, recover (with ``config``, a Config or a preset name) and report into the
+    folder ``out`` (written whole at the end, see :func:`~mi_dsbrdf.app.io.staged_output`);
+    returns the report dict."""
+    config = resolve_config(config)
     with staged_output(out, force, DEMO_FILES) as tmp:
         return _run(tmp, material, res, config, spp)
 

@@ -15,7 +15,7 @@ from tqdm import tqdm
 
 from mi_dsbrdf.app.io import as_mask, as_radiance, check_image, check_out, read_image, read_mask
 from mi_dsbrdf.app.result import RESULT_FILES, Result
-from mi_dsbrdf.config import Config
+from mi_dsbrdf.config import PRESETS, Config, preset
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
@@ -26,11 +26,25 @@ from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
 from mi_dsbrdf.model.model_file import shipped_model
 
 #: fewest usable pixels inference accepts: 16 reflectance unknowns and up to 3 of
-#: the light; a 3-pixel mask once gave a confident light 17 degrees off
+#: the light (a few pixels give a confident, wrong light)
 MIN_PIXELS = 100
 
 
-def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=False) -> Result:
+def resolve_config(config) -> Config:
+    """``config`` as a Config: None is ``Config()``, a string names a preset
+    (:data:`~mi_dsbrdf.config.PRESETS`; ConfigError if unknown); InputError for
+    anything else."""
+    if config is None:
+        return Config()
+    if isinstance(config, str):
+        return preset(config)
+    if not isinstance(config, Config):
+        raise InputError("config must be a mi_dsbrdf.Config or a preset name (%s), got %s"
+                         % (", ".join(PRESETS), type(config).__name__))
+    return config
+
+
+def recover(scene, image, mask=None, config: Config | str = None, progress=None, srgb=False) -> Result:
     """Recover the reflectance and the light of one image of known geometry.
 
     Parameters
@@ -42,7 +56,8 @@ def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=
         radiance, film-sized
     mask : optional path or (H, W) array (bool, or numbers: above half the
         maximum is used)
-    config : :class:`~mi_dsbrdf.config.Config` (default ``Config()``)
+    config : :class:`~mi_dsbrdf.config.Config`, or the name of a preset
+        (``"default"``, ``"fast"``: :data:`~mi_dsbrdf.config.PRESETS`); default ``Config()``
     progress : None (quiet), True (a tqdm bar per round) or a callable given each
         logged round (a dict)
     srgb : linearise an 8-bit image (file or uint8 array) from sRGB instead of
@@ -56,9 +71,7 @@ def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=
     ------
     InputError, SceneError, ConfigError : bad input, with a one-line message.
     """
-    cfg = config if config is not None else Config()
-    if not isinstance(cfg, Config):
-        raise InputError("config must be a mi_dsbrdf.Config, got %s" % type(cfg).__name__)
+    cfg = resolve_config(config)
     scene, source = _scene(scene)
     obs, user_mask = load_inputs(image, mask, srgb)
     film = scene.sensors()[0].film().crop_size()
@@ -105,7 +118,7 @@ def recover(scene, image, mask=None, config: Config = None, progress=None, srgb=
                   image=obs, used=keep, rerender=rerender, scene_source=source)
 
 
-def recover_files(scene_file, image_file, out, mask_file=None, force=False, config: Config = None,
+def recover_files(scene_file, image_file, out, mask_file=None, force=False, config: Config | str = None,
                   progress=True, srgb=False) -> Result:
     """:func:`recover` from files, then :meth:`Result.save` into ``out`` (checked first,
     so that a bad output folder fails before the work)."""

@@ -8,7 +8,7 @@ A mixture, with exact pdf, of
 
 The exponents n_r and weights depend only on wi (for the DSBRDF: its lobe curves
 at theta_d = theta_i, the specular configuration), so :func:`mixture_pdf`
-evaluates exactly the density :func:`mixture_sample` draws from. Written once
+evaluates exactly the density :func:`mixture_sample` samples. Written once
 for numpy (tests) and Dr.Jit (plugins), directions as ``(x, y, z)`` tuples.
 """
 from __future__ import annotations
@@ -69,7 +69,7 @@ def mixture_pdf(wi, wo, w_cos, weights, exponents):
 
 
 def mixture_sample(wi, u1, u2x, u2y, w_cos, weights, exponents):
-    """Draw wo from the mixture with uniform numbers ``u1`` (component) and
+    """Sample wo from the mixture with uniform numbers ``u1`` (component) and
     ``(u2x, u2y)`` (direction). Returns ``(wo, valid)``; invalid samples (below
     the horizon) have ``valid`` False.
     """

@@ -22,8 +22,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.scenes import camera, shape_dict
 from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
 
 #: Adam's learning rate for the BSDF variables and for the log illumination
 LR_BSDF, LR_MAP = 0.02, 0.05
@@ -35,7 +35,8 @@ def _scene(bsdf, res, map_hw, shape, level):
     H, W = map_hw
     env = mi.Bitmap(np.full((H, W, 3), level, dtype=np.float32))
     return mi.load_dict({"type": "scene", "integrator": {"type": "prb", "max_depth": 2 if shape == "sphere" else 3},
-                         "sensor": camera(res), "object": shape_dict(shape, bsdf), "emitter": {"type": "envmap", "bitmap": env}})
+                         "sensor": camera(res), "object": shape_dict(shape, bsdf),
+                         "emitter": {"type": "envmap", "bitmap": env}})
 
 
 def drop_non_finite_gradients(opt) -> int:
@@ -103,7 +104,7 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
         if method == "dsbrdf-adam":          # chromaticity: each lobe's three values sum to one
             c = np.array(opt["object.bsdf.chromaticity"], np.float64).reshape(-1, 3)
             opt["object.bsdf.chromaticity"] = mi.Float((c / c.sum(axis=1, keepdims=True)).reshape(-1))
-        # the loss read after the step, as the loop always did (read before it, it cost 15 % of the time)
+        # the loss read after the step (read before it, it costs 15 % of the time)
         value = float(np.array(loss).reshape(-1)[0])
         rows.append({"round": it, "neg_log_posterior": value, "seconds": time.perf_counter() - t0})
         # a NaN variable renders black through dr.fmax, so the loss alone may stay finite
@@ -112,7 +113,7 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
         if not (np.isfinite(value) and all(bool(f) for f in finite)):
             # Adam diverged (a noisy image can drive the dsbrdf plugin's psi to where it
             # overflows): the answer is the best iterate, as a user's loop would keep
-            # (otherwise the last one, as before)
+            # (otherwise the last one)
             for key, v in (best[1] or before).items():
                 opt[key] = v
             break

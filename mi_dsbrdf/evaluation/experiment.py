@@ -73,8 +73,6 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.io import read_image
-from mi_dsbrdf.app.scenes import camera, shape_dict
 from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
@@ -83,10 +81,12 @@ from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_er
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
                                           scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
+from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.inference.images import read_image
 from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
-from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.build import DEFAULT_K, GMM, build_from_fits, gmm_structure, save_model, stored_fits
 from mi_dsbrdf.model.samples import samples_from_table
@@ -114,9 +114,10 @@ def downsample(env, height, width) -> np.ndarray:
 
 
 def texels(bsdf: dict, res: int, map_hw=(1, 1), shape="sphere", samples=1):
-    """A :class:`~mi_dsbrdf.inference.forward.TexelSum` of ``shape`` (:func:`~mi_dsbrdf.app.scenes.shape_dict`;
-    anything but the sphere with shadow rays) carrying ``bsdf``, seen by the shipped camera,
-    each texel lit from ``samples`` x ``samples`` directions."""
+    """A :class:`~mi_dsbrdf.inference.forward.TexelSum` of ``shape``
+    (:func:`~mi_dsbrdf.inference.scene_dicts.shape_dict`; anything but the sphere with
+    shadow rays) carrying ``bsdf``, seen by the shipped camera, each texel lit from
+    ``samples`` x ``samples`` directions."""
     scene = mi.load_dict({"type": "scene", "sensor": camera(res), "object": shape_dict(shape, bsdf)})
     return TexelSum(scene, scene.shapes()[0], tuple(map_hw), visibility=shape != "sphere", samples=samples)
 
@@ -151,8 +152,7 @@ def loo_model(name, cache, gmm=None, k=None, fits_from=None):
     library from the other 99 fits; the GMM of structure ``gmm``, default the
     build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
     the build's ``DEFAULT_K``; the full fits stored in the model file
-    ``fits_from``, default the shipped one, completed where unseen if that
-    file's were, :func:`~mi_dsbrdf.model.build.build_from_fits`), cached as
+    ``fits_from``, default the shipped one, :func:`~mi_dsbrdf.model.build.build_from_fits`), cached as
     ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``, h the first 12 hex digits of that
     model file's SHA-256, so that a rebuilt model never reuses a leave-one-out
     model of the one before.
@@ -168,10 +168,8 @@ def loo_model(name, cache, gmm=None, k=None, fits_from=None):
     path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, model_file_hash(source), tag))
     if not os.path.exists(path):
         arrays = model_data.load_model(source).arrays
-        # the curves that build completed where unseen, if any
-        complete = [str(c) for c in arrays["fpca_complete_curves"]] if "fpca_complete_curves" in arrays else False
         save_model(path, build_from_fits(stored_fits(arrays), k=k, exclude=[name], refit=False, progress=False,
-                                         gmm=gmm, complete=complete))  # atomic
+                                         gmm=gmm))  # atomic
     return model_data.load_model(path)
 
 

@@ -1,26 +1,16 @@
 """Error measures of the paper, as functions over arrays.
 
-BRDF errors come in two conventions, always named:
+The BRDF errors (Eq. 5 and Eq. 20, in the ``"paper"`` and ``"cosine"``
+conventions) live in :mod:`mi_dsbrdf.brdf.log_error`, where the model's fits
+use them; they are re-exported here beside the measures of a recovery:
 
-* ``"paper"`` — the paper's Eq. 5: the RMS over measured samples and channels of
-  log(f + 1e-6) - log(rho + 1e-6), f the model and rho the measurement in 1/sr.
-  The floor :data:`PAPER_FLOOR` is the one of the authors' lab's code (iBRDF,
-  ``fit_merl.cpp``: ``log(f + 1e-6)``). It weighs every decade of the BRDF
-  alike: a metal predicted at 1e-14/sr where it reflects 1e-3/sr costs as much
-  as a peak off by a factor of 1000.
-* ``"cosine"`` — the graphics-fitting convention (Löw et al. 2012; the neural-BRDF
-  loss): log(1 + rho cos theta_i). Nearly linear below 0.1/sr, so it hardly sees
-  diffuse and dark errors; it measures what a bright picture shows.
-
-Functions:
-
-* :func:`log_rmse` — Eq. 5 in either convention;
-* :func:`log_rmse_scale_invariant` — Eq. 20, the same after the best overall
-  scale of the model: what one image under unknown light can determine;
-* :func:`material_errors` — of a material against measured samples, both conventions;
+* :func:`log_rmse`, :func:`log_rmse_scale_invariant`, :func:`material_errors`,
+  :func:`log_brdf`, :data:`PAPER_FLOOR`, :data:`CONVENTIONS` (see
+  :mod:`mi_dsbrdf.brdf.log_error`);
 * :func:`log_error_by_theta_d` — where in theta_d Eq. 20 (paper) lies;
 * :func:`scale_invariant_log_error` — Eq. 20's measure on images and
   illumination maps; :func:`direction_error_deg` for a recovered light;
+* :func:`relight_psnr` — a relit image's PSNR in the Stanford-ORB convention;
 * :func:`highlight_ratio` — peak over off-peak of a BRDF: whether a
   near-Lambertian material came back with a highlight;
 * :func:`bsdf_values` — any Mitsuba BSDF on the MERL grid, to score baselines
@@ -33,60 +23,11 @@ import math
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from mi_dsbrdf.brdf.angles import from_half_diff
 from mi_dsbrdf.brdf.dsbrdf import highlight_ratio  # noqa: F401 (one of this module's measures)
-
-#: Floor of the paper convention's log, log(f + PAPER_FLOOR) (1/sr).
-PAPER_FLOOR = 1e-6
-#: The two conventions of BRDF errors, the paper's first.
-CONVENTIONS = ("paper", "cosine")
-
-
-def log_brdf(values, cos_i, convention="paper") -> np.ndarray:
-    """The log-BRDF a convention compares: (N, 3) log(rho + 1e-6) (``"paper"``)
-    or log(1 + rho cos theta_i) (``"cosine"``).
-
-    ``values``: (N, 3) BRDF values in 1/sr (negative values count as 0);
-    ``cos_i``: (N,) cosine of the incident angle of each sample (unused by the
-    paper convention).
-    """
-    v = np.maximum(np.asarray(values, dtype=np.float64), 0.0)
-    if convention == "paper":
-        return np.log(v + PAPER_FLOOR)
-    if convention == "cosine":
-        return np.log1p(v * np.asarray(cos_i, dtype=np.float64).reshape(-1, 1))
-    raise ValueError("unknown error convention %r (use one of %s)" % (convention, ", ".join(CONVENTIONS)))
-
-
-def log_rmse(model_values, measured_values, cos_i, convention="paper") -> float:
-    """Eq. 5 in a convention (see the module doc): sqrt(mean over samples and
-    channels of [log_brdf(model) - log_brdf(measured)]^2).
-
-    ``model_values``, ``measured_values``: (N, 3) float arrays in 1/sr over the
-    same N measured samples; ``cos_i``: (N,). Returns a float (dimensionless).
-    """
-    a = log_brdf(model_values, cos_i, convention)
-    b = log_brdf(measured_values, cos_i, convention)
-    if a.shape != b.shape:
-        raise ValueError("model and measured values differ in shape: %s vs %s" % (a.shape, b.shape))
-    return float(np.sqrt(np.mean((a - b) ** 2)))
-
-
-def log_rmse_scale_invariant(model_values, measured_values, cos_i, convention="paper") -> tuple:
-    """Eq. 20: min over s > 0 of Eq. 5 (in ``convention``) between s * model and
-    the measurement.
-
-    Under illumination of unknown strength only light x reflectance is
-    observable, so a recovered BRDF is scored up to one overall scale.
-    Returns (error, s). The minimum is found by Brent's bounded search on log s
-    (Eq. 5 of a scaled model is unimodal in log s in practice; s in 1e-6..1e6).
-    """
-    m = np.asarray(model_values, dtype=np.float64)
-    res = minimize_scalar(lambda log_s: log_rmse(m * np.exp(log_s), measured_values, cos_i, convention),
-                          method="bounded", bounds=(math.log(1e-6), math.log(1e6)), options={"xatol": 1e-6})
-    return float(res.fun), float(np.exp(res.x))
+from mi_dsbrdf.brdf.log_error import (CONVENTIONS, PAPER_FLOOR, log_brdf, log_rmse,  # noqa: F401 (re-exported)
+                                      log_rmse_scale_invariant, material_errors)
 
 
 #: theta_d bands (degrees) of :func:`log_error_by_theta_d`: the last holds the
@@ -113,16 +54,6 @@ def log_error_by_theta_d(model_values, measured_values, theta_d, scale=1.0, band
         out["%d-%d" % (lo, hi)] = {"rms": float(np.sqrt(np.mean(d[sel] ** 2))), "mean": float(d[sel].mean()),
                                    "share": float((d[sel] ** 2).sum() / total)}
     return out
-
-
-def material_errors(material, samples, scale_invariant=True, conventions=CONVENTIONS) -> dict:
-    """Eq. 20 (or Eq. 5) of a material (anything with ``.eval(theta_h, theta_d)``,
-    e.g. :class:`~mi_dsbrdf.brdf.dsbrdf.Material`) against measured
-    :class:`~mi_dsbrdf.model.samples.Samples`: ``{convention: error}``."""
-    values = material.eval(samples.theta_h, samples.theta_d)
-    if scale_invariant:
-        return {c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0] for c in conventions}
-    return {c: log_rmse(values, samples.values, samples.cos_i, c) for c in conventions}
 
 
 def direction_error_deg(a, b) -> float:

@@ -23,26 +23,23 @@ Start: chromaticity from the image's colour
 (:func:`~mi_dsbrdf.inference.reflectance.image_chroma_logits`) and, for each of
 :func:`~mi_dsbrdf.inference.reflectance.reflectance_starts` (psi = 0 and the
 GMM means), a constant map at the image's level refined by a short grey
-illumination block and a short reflectance block; the best
-(``Config.start_candidates`` of them: each runs the grey pass, and the lowest
-posterior at its end goes on) starts the rounds (:func:`alternate`).
+illumination block and a short reflectance block; the lowest posterior starts
+the rounds (:func:`alternate`). The start runs on the map at half its
+resolution (:func:`map_sizes`, ``Config.map_levels``); its map moves up by
+:func:`resample`.
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
 channels: the grey-world assumption; the lobes keep the image's colour), then
 colour from that start (chromaticities and map colour free), unless the
 image is grey (:mod:`mi_dsbrdf.inference.scene_needs` decides).
-``Config.grey_rounds`` sets the grey pass's rounds; 0 leaves it out of a
-colour image's inference (an option: faster, one validation map win fewer).
+
 Second route (``Config.second_route_highlight``, not in the paper): an answer
 with a highlight is checked against a second inference, whose starts are
 judged on the colour pass's own posterior (the full map, texels lit from
-2 x 2 directions: ``Config.start_on_colour_posterior``) and which has no grey
-pass; the lower posterior wins, and a last row ``{"pass": "answer",
-"answer_route": 0 or 1}`` repeats the winner's figures. The coarse start at
-texel centres misjudges lobes sharper than the texel spacing, and for glossy
-materials it chose basins far above the truth's (:func:`route`).
-The start runs on the map at half its resolution (:func:`map_sizes`,
-``Config.map_levels``); its map moves up by :func:`resample`.
+``texel_samples`` squared directions) and which has no grey pass; the lower
+posterior wins, and a last row ``{"pass": "answer", "answer_route": 0 or 1}``
+repeats the winner's figures. The coarse start at texel centres misjudges
+lobes sharper than the texel spacing (:func:`route`).
 
 Colour split (not in the paper): one image shows only the product of the
 light's colour and the material's. Given the chromaticity and light-colour
@@ -92,7 +89,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         posterior brings its own)
     observed : (H, W, 3) float radiance; mask : (H, W) bool usable pixels
     model : :class:`~mi_dsbrdf.model.model_file.ReflectanceModel`
-    config : :class:`~mi_dsbrdf.config.Config` (default: the benchmarked setting)
+    config : :class:`~mi_dsbrdf.config.Config` (default ``Config()``)
     colour : run the colour pass after the grey one
     progress : called with each logged row
     starts : the psi (k,) to start from (default
@@ -102,9 +99,8 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     cfg = config or Config()
     # the image's units: the method is invariant to them (light x material), this
     # code's constants are not (the map's log bounds and the BLACK of unseen texels;
-    # L-BFGS-B's first step runs to those bounds), and the same image times 2^20
-    # came back with another material. Inference sees the image at a mean of one,
-    # and the map is scaled back at the end
+    # L-BFGS-B's first step runs to those bounds). Inference sees the image at a
+    # mean of one, and the map is scaled back at the end
     exposure = image_level(observed, mask)
     observed = np.asarray(observed, dtype=np.float64) / exposure
     posteriors = {}
@@ -120,8 +116,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                 samples = cfg.grey_texel_samples
             # the start and the grey pass hold the lobes at the image's colour and the
             # map grey: the colour-split priors are constants there, and left out (a
-            # constant moved Levenberg-Marquardt's relative stopping test, and with
-            # it the whole run)
+            # constant would move Levenberg-Marquardt's relative stopping test)
             pass_cfg = cfg.with_colour_split(False)
         key = (size, samples, pass_cfg)
         if key not in posteriors:
@@ -137,19 +132,17 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         if progress:
             progress(rows[-1])
 
-    # Config.grey_rounds 0 leaves the grey pass out of a colour image's inference
-    end = route(posterior, model, starts, cfg, log, colour, cfg.start_on_colour_posterior and colour,
-                not colour or cfg.grey_rounds != 0)
+    end = route(posterior, model, starts, cfg, log, colour, on_colour=False, grey_pass=True)
     # the second route (Config.second_route_highlight): an answer with a highlight is
     # checked against the inference that judges the starts on the colour pass's
     # posterior and has no grey pass; the lower posterior of the two (the same
     # posterior: both end in the colour pass) is the answer
-    second = (colour and cfg.second_route_highlight is not None
-              and not (cfg.start_on_colour_posterior and cfg.grey_rounds == 0))
+    second = colour and cfg.second_route_highlight is not None
     if second and Material.from_basis(model.basis, end[0], softmax_chroma(end[1])).highlight_ratio() \
             > cfg.second_route_highlight:
         first_last = rows[-1]
-        other = route(posterior, model, starts, cfg, lambda row: log(dict(row, route=1)), True, True, False)
+        other = route(posterior, model, starts, cfg, lambda row: log(dict(row, route=1)), True, on_colour=True,
+                      grey_pass=False)
         won = int(other[4] < end[4])             # a tie keeps the first route's answer
         # the answer's row last, so that the log's last row is the answer's posterior
         # (Recovery.neg_log_posterior) whichever route it came from
@@ -172,22 +165,19 @@ def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> t
     posterior)."""
     passes = (["grey"] if grey_pass else []) + (["colour"] if colour else [])
     sizes = map_sizes(cfg.map_size, cfg.map_levels, len(passes))
-    # on_colour (Config.start_on_colour_posterior): the starts are judged on the
-    # colour pass's posterior (the full map, each texel lit from texel_samples^2
-    # directions), by an illumination block with the material held; else on the
-    # coarse map at texel centres, by an illumination block and a reflectance block
+    # on_colour: the starts are judged on the colour pass's posterior (the full map,
+    # each texel lit from texel_samples^2 directions), by an illumination block with
+    # the material held; else on the coarse map at texel centres, by an illumination
+    # block and a reflectance block
     post = posterior(sizes[-1], "colour") if on_colour else posterior(sizes[0], "start")
     start_size = sizes[-1] if on_colour else sizes[0]
     logits0 = image_chroma_logits(post.observed, post.keep, post.R)
-    # the start and the grey pass keep every lobe at the image's colour: under a grey
-    # map, free chromaticities explained the light's colour, which varies over the
-    # sphere, by saturated lobes (nickel under the warm wells probe: a lobe of
-    # (0.81, 0.18, 0.00) from an image of (0.44, 0.31, 0.25)), and the colour pass
-    # never undid it (it turned the map blue instead); the colour pass frees them
-    # start (on the coarse map): each reflectance start with the constant map that
-    # matches the image's median level, refined by one grey illumination block and
-    # one reflectance block; the best Config.start_candidates of them by posterior
-    # each run the grey pass, and the lowest posterior at its end continues
+    # each reflectance start with the constant map that matches the image's median
+    # level, refined by one grey illumination block and one reflectance block (or,
+    # on_colour, an illumination block alone); the lowest posterior goes on. The
+    # start and the grey pass keep every lobe at the image's colour (under a grey
+    # map, free chromaticities would explain the light's colour by saturated
+    # lobes); the colour pass frees them
     found = []
     H, W = start_size
     for i, p0 in enumerate(psi_starts(model, starts)):
@@ -207,15 +197,9 @@ def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> t
             psi, logits, scale = step.psi, step.logits, float(np.log(step.L.max() / L.max()))
         log({"pass": "start", "round": i, "neg_log_posterior": value, "map_size": [H, W]})
         found.append((value, psi, logits, np.where(seen[..., None], x + scale, BLACK)))
-    # sorted is stable: equal posteriors keep the starts' order
-    candidates = sorted(found, key=lambda f: f[0])[:cfg.start_candidates]
-    # the grey pass from each candidate (one candidate: the start's choice stands)
-    first = posterior(sizes[1], passes[0])
-    ends = [alternate(first, passes[0], sizes[1], psi, logits, log_map, cfg, log,
-                      candidate=i if len(candidates) > 1 else None)
-            for i, (_, psi, logits, log_map) in enumerate(candidates)]
-    end = min(ends, key=lambda e: e[4])
-    for pass_name, size in zip(passes[1:], sizes[2:]):
+    # min is stable: equal posteriors keep the starts' order
+    end = min(found, key=lambda f: f[0])[1:]
+    for pass_name, size in zip(passes, sizes[1:]):
         end = alternate(posterior(size, pass_name), pass_name, size, *end[:3], cfg, log)
     return end
 
@@ -237,41 +221,34 @@ def image_level(observed, mask) -> float:
     return level
 
 
-def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=None) -> tuple:
+def alternate(post, pass_name, size, psi, logits, log_map, cfg, log) -> tuple:
     """One pass of alternating illumination and reflectance blocks (at most
-    ``cfg.max_rounds`` rounds, ``cfg.grey_rounds`` in the grey pass if set, until
-    the posterior changes by less than ``cfg.tol``) on a map of ``size`` from the
-    given state (the map resampled to it). Logs one row per round
-    (``candidate``: which of the start's candidates the pass runs from, if
-    several). Returns (psi, logits, log map, seen (H, W),
+    ``cfg.max_rounds`` rounds, until the posterior changes by less than
+    ``cfg.tol``) on a map of ``size`` from the given state (the map resampled to
+    it). Logs one row per round. Returns (psi, logits, log map, seen (H, W),
     negative log posterior)."""
     H, W = size
     log_map = resample(log_map, size)
     T = post.transport(psi, logits)
     seen = ~post.view.unseen.reshape(H, W)
-    extra = {} if candidate is None else {"candidate": candidate}
     prev = kept = None
-    # the grey pass's own budget (0 or None: max_rounds; it runs under 0 only when the image is grey)
-    rounds = cfg.grey_rounds if pass_name == "grey" and cfg.grey_rounds else cfg.max_rounds
-    for rnd in range(rounds):
+    for rnd in range(cfg.max_rounds):
         # illumination block (T from the current reflectance)
         bins = post.entropy.bins_for(log_map, seen)
         log_map = illumination_block(post, log_map, T, seen, bins, pass_name == "grey", cfg.illumination_iters)
         kept = posterior_at(post, psi, logits, log_map, T, seen, bins)
         # reflectance block, with the map's overall scale, over a subset of the
         # pixels: kept only if the posterior over all of them falls too (a step
-        # that fits the subset can ruin the rest: a red fabric under ennis went
-        # from 7.6e3 to 4.9e5 that way). From the colour pass's second round it
-        # first takes the joint step along the colour split (colour_split), which
-        # neither block takes; the reflectance block then settles each lobe's
-        # brightness, and the two are kept or rejected together (if rejected, the
-        # block alone is tried). Not in the first round: the sharper lobes' colour
-        # is still the start's guess (START_GREY_MIX), not the image's, and a
-        # dark red paint under a blue sky put its red into the map on that guess
+        # that fits the subset can ruin the rest). From the colour pass's second
+        # round it first takes the joint step along the colour split
+        # (colour_split), which neither block takes; the reflectance block then
+        # settles each lobe's brightness, and the two are kept or rejected
+        # together (if rejected, the block alone runs). Not in the first round:
+        # the sharper lobes' colour is still the start's guess (START_GREY_MIX)
         tries = [(False, logits, log_map)]
         if pass_name == "colour" and cfg.colour_split and rnd > 0:
             tries.insert(0, (True, *colour_split(post, logits, log_map, seen)))
-        for split_tried, try_logits, try_map in tries:
+        for with_split, try_logits, try_map in tries:
             L = np.where(seen[..., None], np.exp(try_map), 0.0).reshape(-1, 3)
             step = reflectance_block(post, psi, try_logits, L, cfg.block_iters, fit_scale=True,
                                      fit_chroma=pass_name == "colour")
@@ -283,9 +260,9 @@ def alternate(post, pass_name, size, psi, logits, log_map, cfg, log, candidate=N
                 psi, logits, log_map, T, kept = step.psi, step.logits, new_map, new_T, new
                 break
         total, lik, terms = kept
-        log({"pass": pass_name, "round": rnd, **extra, "neg_log_posterior": total, "likelihood": lik, **terms,
+        log({"pass": pass_name, "round": rnd, "neg_log_posterior": total, "likelihood": lik, **terms,
              "unseen_texels": int((~seen).sum()), "map_size": [H, W], "reflectance_step_rejected": rejected,
-             "colour_split_kept": bool(split_tried and not rejected)})
+             "colour_split_kept": bool(with_split and not rejected)})
         if prev is not None and abs(prev - total) <= cfg.tol * abs(prev):
             break
         prev = total
@@ -348,10 +325,7 @@ def map_sizes(map_size, levels, n_passes) -> list:
     halved ``levels - 1`` times (never below 2 x 4), every pass on ``map_size``.
     The start only chooses among the reflectance starts, and a coarse map has fewer
     unknowns and a smaller transport. The passes do not run coarse: a lobe sharper
-    than the texel spacing hides between texel centres, and a grey pass at half
-    resolution settled on such spikes, which the full map then exposed (a red
-    fabric under ennis relit with error 17 instead of 0.1); a start at a quarter
-    resolution chose the wrong basin for it (0.7)."""
+    than the texel spacing hides between the texel centres of a coarse map."""
     H, W = map_size
     start = (max(H >> (levels - 1), 2), max(W >> (levels - 1), 4))
     return [start] + [(H, W)] * n_passes

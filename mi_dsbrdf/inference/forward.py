@@ -12,7 +12,7 @@ lit from s x s directions of its footprint, each with its share of the solid
 angle (the sum over t then runs over them, L_t shared): the map as a
 piecewise-constant function of direction, as a camera sees it. From the texel
 centres alone a lobe narrower than the texel spacing sparkles where the image
-is smooth (``benchmarks/texel_sampling.py``). Unlike Monte Carlo rendering this is
+is smooth. Unlike Monte Carlo rendering this is
 noise-free, so gradients are exact and the optimiser can use line searches.
 Geometry comes from Mitsuba (one ray through each pixel centre); the BSDF is
 the scene's ``dsbrdf`` (or any) Mitsuba BSDF, evaluated by Dr.Jit on
@@ -161,8 +161,7 @@ class TexelSum:
         """(rows, texels) float32: sums over each texel's directions of ``pairs``, a
         Dr.Jit Float of rows x directions values (row-major; whole texels in order:
         all of them, or a chunk of :meth:`_chunks`). Summed by Dr.Jit before the copy
-        to numpy: numpy's reduction over the short last axis took over half of the
-        inference's time at ``samples`` 2 (``benchmarks/texel_sampling.py --speed``)."""
+        to numpy (numpy's reduction over the short last axis is slow)."""
         if self.per_texel > 1:
             pairs = dr.block_sum(pairs, self.per_texel)
         return pairs.numpy().reshape(rows, -1)

@@ -33,9 +33,13 @@ SEARCH_DIRECTIONS, SEARCH_KEEP = 64, 6
 #: the search's reflectance fits run this fraction of a block's iterations (at least 5)
 SEARCH_FRACTION = 0.25
 #: function evaluations of the search's coarse Powell refinement, and of a light block
-#: (the search at 100 took 2.5x as long, and every point case of the experiments
-#: with priors came back within 1 % in Eq. 20 at 40: docs/light_search.md)
+#: (40 in the search: within 1 % in Eq. 20 of the answers at 100, in 40 % of the time)
 SEARCH_POWELL_EVALS, POWELL_EVALS = 40, 400
+#: the fraction of its components' volume terms the GMM prior keeps under a point or
+#: directional light (:class:`~mi_dsbrdf.inference.objective.Posterior`): 1 is the
+#: normalised density of Eq. 6 (a light sees a narrow band of theta_d, and the prior
+#: carries more of the answer)
+LIGHT_GMM_VOLUME = 1.0
 
 
 def light_likelihood(post, material, theta, phi, log_intensity) -> float:
@@ -105,21 +109,20 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     texels : the view (its BSDF is not used: the posterior brings its own)
     observed : (H, W, 3) float radiance; mask : (H, W) bool usable pixels
     model : :class:`~mi_dsbrdf.model.model_file.ReflectanceModel`
-    config : :class:`~mi_dsbrdf.config.Config` (default: the benchmarked setting)
+    config : :class:`~mi_dsbrdf.config.Config` (default ``Config()``)
     progress : called with each logged row
     known_light : (direction (3,), intensity): skip the light search and block
     point : (centre (3,), distance) of a point light: it sits at ``distance``
         from ``centre`` in the recovered direction; None: a directional light
     colour : fit the lobes' chromaticities; False for a grey image, whose lobes
-        keep its colour (grey): free, a lobe the image barely shows took any
-        colour (a grey sphere with a clipped highlight came back with a lobe of
-        (1.00, 0.00, 0.00))
+        keep its colour (grey): free, a lobe the image barely shows could take any
+        colour
     """
     cfg = config or Config()
     # the light is white by assumption (its colour is the material's): the priors that
     # split the image's colour between material and light are a map's
     post = Posterior(texels, observed, mask, model, cfg.with_colour_split(False), point=point,
-                     gmm_volume=cfg.light_gmm_volume)
+                     gmm_volume=LIGHT_GMM_VOLUME)
     logits = image_chroma_logits(post.observed, post.keep, post.R)
     psi = np.zeros(post.k)
     t0 = time.perf_counter()

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Width of the smoothed kink of |.| (in log units): |d| ~ sqrt(d^2 + s^2) - s
-#: (the default of ``Config.likelihood_kink``).
+#: Width s of the smoothed kink of |.| (in log units): |d| ~ sqrt(d^2 + s^2) - s;
+#: residuals below s count quadratically.
 KINK = 1e-3
 
 

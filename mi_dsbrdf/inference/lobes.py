@@ -17,7 +17,7 @@ derivatives by the spline control values (:mod:`mi_dsbrdf.brdf.curves`) are
 weights are >= 0 and sum to one). So :class:`LobeSum` stores the three numbers
 once per view and light, and one Dr.Jit kernel evaluates every lobe and all 36
 derivative columns; the sums over texels are float32 BLAS products with the
-map. Hand-written for measured speed (``benchmarks/inference_cases.py``): the
+map. Hand-written for speed: the
 plugin path needs one forward-mode pass per column and re-derives the angles in
 every pass. The kernel is Dr.Jit code of the active variant (``cuda_ad_rgb``
 runs it on a GPU); the BLAS products run on the CPU.
@@ -52,9 +52,7 @@ class LobeJacobian:
 
     Variable- and channel-major, pixels last: the chain rule to psi is one
     matrix product over contiguous rows, and every elementwise step loops over
-    pixels (pixel-major, with the 3 channels innermost and a transposing copy,
-    a point light's Jacobian took 16 ms instead of 12; the rest of its fall, to
-    3 ms, is :func:`~mi_dsbrdf.backend.keep_freed_memory`'s).
+    pixels (faster than pixel-major with the 3 channels innermost).
     """
     image: np.ndarray
     controls: np.ndarray
@@ -100,8 +98,8 @@ class LobeSum:
         """Pixel ranges [p0, p1) of at most ``chunk`` pairs, and for each of a texel's
         directions (``texels.per_texel`` of them) the geometry of the range's
         pixel-texel lanes (pixel-major). The kernels sum a texel's directions in
-        registers: an evaluated array per direction and a reduction after it took
-        half the inference's time at ``texel_samples`` 2."""
+        registers (an evaluated array per direction and a reduction after it
+        would double the inference's time at ``texel_samples`` 2)."""
         k = self.texels.per_texel
         step = max(1, chunk // max(self.n_directions, 1))
         if k == 1 and step >= self.n_pixels:

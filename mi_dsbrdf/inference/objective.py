@@ -26,7 +26,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint
 from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior, LightColourPrior
-from mi_dsbrdf.inference.likelihood import log_likelihood_terms
+from mi_dsbrdf.inference.likelihood import KINK, log_likelihood_terms
 
 #: how far (natural log) a recovered kappa/gamma control value may leave the range the
 #: library's materials span at that control point before CURVE_PENALTY applies
@@ -37,9 +37,13 @@ ENERGY_MARGIN = 0.5
 #: weight of the squared excess (log units) of a control value or a lobe's energy beyond its range
 CURVE_PENALTY = 100.0
 #: the fewest and the most pixels the reflectance block works on (16 + 6 variables:
-#: a few thousand pixels, evenly spread, constrain them as well as all of them do;
-#: at 2048 two of 24 point-light cases of the experiments fell into other minima)
+#: a few thousand pixels, evenly spread, constrain them as well as all of them do)
 MIN_REFLECTANCE_PIXELS, MAX_REFLECTANCE_PIXELS = 64, 4096
+#: the fraction (0 to 1) of its components' volume terms the GMM prior keeps under
+#: an illumination map (:meth:`~mi_dsbrdf.model.priors.GaussianMixture.nll`): 0 ranks
+#: psi by weight and Mahalanobis distance only, so that the GMM's narrow components
+#: do not outweigh its broad ones (near-Lambertian materials)
+GMM_VOLUME = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,19 +90,19 @@ class Posterior:
     max_pixels : the most pixels the posterior works on (default
         ``config.map_pairs`` / texels; see :class:`~mi_dsbrdf.config.Config`)
     gmm_volume : the fraction of the GMM's volume terms the prior keeps (default
-        ``config.gmm_volume``, the choice under a map; a light's inference passes
-        ``config.light_gmm_volume``)
+        :data:`GMM_VOLUME`, a map's; a light's inference passes
+        :data:`~mi_dsbrdf.inference.light.LIGHT_GMM_VOLUME`)
     """
 
     def __init__(self, texels: TexelSum, observed, mask, model, config: Config, point=None, max_pixels=None,
                  gmm_volume=None):
         self.model, self.cfg, self.point = model, config, point
-        self.gmm_volume = config.gmm_volume if gmm_volume is None else gmm_volume
+        self.gmm_volume = GMM_VOLUME if gmm_volume is None else gmm_volume
         obs = np.asarray(observed, dtype=np.float64).reshape(-1, observed.shape[-1])[texels.pixels, :3]
         keep = np.asarray(mask, bool).reshape(-1)[texels.pixels]
         self.offset = config.log_offset * float(np.mean(obs[keep]))    # > 0 even when most pixels are unlit
         self.scale = config.likelihood_scale                  # Eq. 19: sum |log error| / b
-        self.kink = config.likelihood_kink
+        self.kink = KINK
         self.k, self.R = model.basis.n_bases, model.basis.n_lobes
         n_usable = int(keep.sum())
         # the posterior's pixels (Config.map_pairs): all usable ones, or an evenly

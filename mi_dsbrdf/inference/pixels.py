@@ -3,14 +3,12 @@ app (:func:`mi_dsbrdf.recover`) and of every benchmark that scores it.
 
 A pixel is usable when its centre sees the object, its four neighbours do too
 (a silhouette pixel of a photograph also sees the background: its value is a
-mixture the forward model does not draw), it lies inside the user's mask, and
+mixture the forward model does not render), it lies inside the user's mask, and
 it is not on a clipping plateau.
 
-Dropping the silhouette ring costs accuracy on images that have no such
-mixture (a render at pixel centres): on the natural-light validation set the
-BRDF's median ratio to the mean material was 0.48x with the ring and 0.56x
-without it (docs/natural_light_history.md, *The eighteenth session*). The benchmarks
-measure what a user gets, so they drop it too.
+Dropping the silhouette ring costs some accuracy on images that have no such
+mixture (a render at pixel centres); the benchmarks measure what a user gets,
+so they drop it too.
 """
 from __future__ import annotations
 

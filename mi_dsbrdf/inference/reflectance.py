@@ -58,8 +58,7 @@ def image_chroma_logits(observed, keep, n_lobes) -> np.ndarray:
     """(R, 2) chromaticity variables of the start: the broad lobe (lobe 0) takes
     the chromaticity of the usable pixels' mean colour, the sharper lobes that
     colour mixed with grey by START_GREY_MIX. A grey image starts (and, with the
-    hue prior, stays) grey; a start from random chromaticities came back with
-    coloured lobes on a grey object and traded the object's colour between lobes."""
+    hue prior, stays) grey (a random start gives a grey object coloured lobes)."""
     mean = np.maximum(np.asarray(observed, dtype=np.float64)[np.asarray(keep, bool)].mean(axis=0), 0.0)
     c = mean / mean.sum() if mean.sum() > 0 else np.full(3, 1 / 3)
     chroma = np.repeat(((1 - START_GREY_MIX) * c + START_GREY_MIX / 3)[None], n_lobes, axis=0)

@@ -18,7 +18,7 @@ from scipy.optimize import least_squares
 from scipy.special import expit
 
 from mi_dsbrdf.brdf.angles import from_half_diff
-from mi_dsbrdf.evaluation.metrics import log_rmse
+from mi_dsbrdf.brdf.log_error import log_rmse
 from mi_dsbrdf.model.fit_problem import OBJECTIVE, FitObjective
 
 LOG_M_MIN, LOG_M_MAX = math.log(1e-3), math.log(2.0)
@@ -38,7 +38,7 @@ def cook_torrance(params, theta_h, theta_d, phi_d, n_lobes) -> np.ndarray:
     out = np.repeat((np.exp(np.clip(p[:3], -30, 20)) / math.pi)[None], th.size, axis=0)
     for lobe in range(n_lobes):
         q = p[3 + 7 * lobe: 10 + 7 * lobe]
-        # clipped exponents: an optimiser's trial step never overflows to inf * 0
+        # clipped exponents: no optimiser step overflows to inf * 0
         ks, m2 = np.exp(np.clip(q[:3], -30, 20)), math.exp(2 * min(max(q[3], LOG_M_MIN), LOG_M_MAX))
         f0 = expit(q[4:7])
         D = np.exp(-tan2 / m2) / (math.pi * m2 * np.maximum(ch, 1e-6) ** 4)

@@ -37,17 +37,16 @@ from mi_dsbrdf.brdf.measured import nbrdf_names
 from mi_dsbrdf.errors import MeasuredFileError, ModelError
 from mi_dsbrdf.model import samples
 from mi_dsbrdf.model.fit_problem import OBJECTIVE, FitObjective
-from mi_dsbrdf.model.fitting import fit_basis, fit_full, unseen_ranges
-from mi_dsbrdf.model.fpca import complete_unseen, fpca
+from mi_dsbrdf.model.fitting import fit_basis, fit_full
+from mi_dsbrdf.model.fpca import fpca
 from mi_dsbrdf.model.model_file import load_model
 from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration, select_gmm
 
 DEFAULT_K = 10
 SEED = 0
 #: the GMM prior's structure (:func:`gmm_structure`): "bic", or
-#: "covariance:components:reg". Four diagonal components, the natural-light
-#: validation set's choice (docs/natural_light_history.md, *A bound on each lobe's energy, and the
-#: GMM's structure again*; BIC's four full ones left near-Lambertian materials glossy)
+#: "covariance:components:reg". Four diagonal components: BIC's four full ones
+#: leave near-Lambertian materials glossy under natural light.
 GMM = "diag:4:0.001"
 
 
@@ -133,11 +132,6 @@ def _fit_basis_job(args):
     return name, f.variables, f.material.chromaticity, (f.error, f.error_cosine)
 
 
-def _unseen_ranges_job(args):
-    source, name, ctrl, chroma, objective = args
-    return unseen_ranges(load_samples(source, name), ctrl, chroma, objective=objective)
-
-
 def _map(fn, jobs, workers, desc, progress):
     """Run ``fn`` over ``jobs`` in ``workers`` processes, in job order, with a progress bar."""
     bar = tqdm(total=len(jobs), desc=desc, disable=not progress, unit="mat", file=sys.stderr)
@@ -174,44 +168,8 @@ def fit_all(source, names=None, workers=2, progress=True, objective: FitObjectiv
             "flags": [list(r[4]) for r in rows], "seconds": np.array([r[5] for r in rows])}
 
 
-#: The curves ``build-model --complete-unseen`` may name: (lobe, curve) by "lobe:kappa|gamma".
-CURVES = {"%d:%s" % (r, c): (r, i) for r in range(3) for i, c in enumerate(("kappa", "gamma"))}
-
-
-def curve_mask(curves) -> np.ndarray:
-    """(3, 2) bool: the (lobe, curve) pairs named by ``curves`` (:data:`CURVES`); ModelError otherwise."""
-    curves = list(curves)
-    bad = [c for c in curves if c not in CURVES]
-    if bad or not curves:
-        raise ModelError("curves to complete: give lobe:curve among %s, got %s"
-                         % (", ".join(CURVES), " ".join(curves) or "none"))
-    mask = np.zeros((3, 2), dtype=bool)
-    for c in curves:
-        mask[CURVES[c]] = True
-    return mask
-
-
-def restrict_ranges(fits: dict, curves) -> dict:
-    """``fits`` with ranges (:func:`fit_unseen_ranges`) kept only on ``curves``
-    (names of :data:`CURVES`, e.g. ``["0:gamma"]``): every other control value's
-    range becomes the value itself, so completion leaves it where the fit put it.
-    A copy; ModelError on an unknown name."""
-    keep = curve_mask(curves)[None, :, :, None]
-    return {**fits, "lower": np.where(keep, fits["lower"], fits["controls"]),
-            "upper": np.where(keep, fits["upper"], fits["controls"])}
-
-
-def fit_unseen_ranges(source, fits: dict, workers=2, progress=True, objective: FitObjective = OBJECTIVE) -> dict:
-    """``fits`` (:func:`fit_all`) with the range of each control value the
-    measurements barely see (:func:`~mi_dsbrdf.model.fitting.unseen_ranges`):
-    a copy with ``"lower"`` and ``"upper"`` (M, 3, 2, 6) added."""
-    jobs = [(os.fspath(source), n, c, x, objective) for n, c, x in zip(fits["names"], fits["controls"], fits["chroma"])]
-    rows = _map(_unseen_ranges_job, jobs, workers, "unseen ranges", progress)
-    return {**fits, "lower": np.array([r[0] for r in rows]), "upper": np.array([r[1] for r in rows])}
-
-
 def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2, progress=True,
-                    refit=True, gmm=GMM, complete=False) -> dict:
+                    refit=True, gmm=GMM) -> dict:
     """Bases, library and priors from full fits, without the ``exclude``d materials.
 
     With ``refit`` (and a ``source``), every kept material is refitted in the
@@ -219,15 +177,9 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     its FPCA score and its chromaticity that of the full fit (fast, for
     leave-one-out studies). Either way the priors are fitted to the FPCA scores
     and the full fits' chromaticities (paper §3: psi are the FPCA coefficients),
-    so that a leave-one-out model's priors are the build's: priors fitted to the
-    refits instead recovered held-out materials worse from images (natural-light
-    validation, BRDF 0.54x the mean material against 0.48x; README, *The
-    reflectance model*). With ``complete`` (True, or a list of curves,
-    :func:`restrict_ranges`; ``fits`` must hold the ranges of
-    :func:`fit_unseen_ranges`), functional PCA sees the control values completed
-    where the measurements do not see them (:func:`~mi_dsbrdf.model.fpca.complete_unseen`),
-    not the values the fits left there; the file keeps the ranges whole and the
-    curves completed (``fpca_complete_curves``). Returns the arrays of a model file.
+    so that a leave-one-out model's priors are the build's (priors fitted to the
+    refits recover held-out materials worse from images). Returns the arrays of a
+    model file.
     """
     names = list(fits["names"])
     exclude = list(exclude)
@@ -238,18 +190,7 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
     if len(keep) < k + 2:
         raise ModelError("%d materials are too few for %d bases" % (len(keep), k))
     kept = [names[i] for i in keep]
-    controls, extra = fits["controls"][keep], {}
-    if "lower" in fits:
-        extra = {"fit_lower": fits["lower"], "fit_upper": fits["upper"]}
-    if complete is not False:
-        if "lower" not in fits:
-            raise ModelError("completing unseen control values needs their ranges (build with the measurements)")
-        curves = list(CURVES) if complete is True else list(complete)
-        ranges = restrict_ranges(fits, curves)
-        controls, iterations = complete_unseen(controls, ranges["lower"][keep], ranges["upper"][keep], k)
-        extra.update(fpca_controls=controls, fpca_completion_iterations=np.array(iterations),
-                     fpca_complete_curves=np.array(curves))
-    pca = fpca(controls)
+    pca = fpca(fits["controls"][keep])
     basis = pca.basis(k)
     scores, fit_chroma = pca.scores[:, :k], fits["chroma"][keep]     # the priors' data, refit or not
     if refit:
@@ -276,24 +217,16 @@ def build_from_fits(fits: dict, k=DEFAULT_K, exclude=(), source=None, workers=2,
         **fit_gmm_prior(scores, gmm),
         "hue_kappa": np.array(kappa_h), "hue_pairs": np.array(n_pairs),
         "excluded": np.array(exclude, dtype=str),
-        **extra,
     }
 
 
 def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, fits_from=None,
-                gmm=GMM, objective: FitObjective = OBJECTIVE, complete=False) -> dict:
+                gmm=GMM, objective: FitObjective = OBJECTIVE) -> dict:
     """The whole build, written to ``out`` (a ``.npz``). ``fits_from``: a model
     file whose stored full fits are reused instead of refitting them; ``gmm``: the
     GMM's structure (:func:`gmm_structure`); ``objective``: what the full fits
-    minimise (recorded; with ``fits_from`` the stored fits' own); ``complete``:
-    functional PCA on the control values completed where the measurements do
-    not see them (:func:`build_from_fits`): True on every curve, or a list of
-    curves (:func:`restrict_ranges`; the file records them, so leave-one-out
-    builds from it complete the same values). Returns the arrays."""
+    minimise (recorded; with ``fits_from`` the stored fits' own). Returns the arrays."""
     gmm_structure(gmm)                                        # a bad structure fails before the fits
-    curves = None if isinstance(complete, bool) else list(complete)
-    if curves is not None:
-        curve_mask(curves)                                    # a bad name fails before the fits
     t0 = time.perf_counter()
     if fits_from is not None:
         if objective != OBJECTIVE:
@@ -306,25 +239,19 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     else:
         fits = fit_all(source, workers=workers, progress=progress, objective=objective)
         fitted_by = dataclasses.asdict(objective)
-    if complete is not False and "lower" not in fits:
-        fits = fit_unseen_ranges(source, fits, workers=workers, progress=progress,
-                                 objective=FitObjective(**fitted_by) if fitted_by else OBJECTIVE)
     arrays = build_from_fits(fits, k=k, exclude=exclude, source=source, workers=workers, progress=progress,
-                             gmm=gmm, complete=complete if curves is None else curves)
+                             gmm=gmm)
     info = {"source": source_kind(source), "source_file": os.path.basename(os.fspath(source)),
             "k": k, "excluded": list(exclude), "seed": SEED, "gmm": str(gmm),
-            "fit_objective": fitted_by, "complete_unseen": complete if curves is None else curves,
-            "seconds": round(time.perf_counter() - t0, 1),
+            "fit_objective": fitted_by, "seconds": round(time.perf_counter() - t0, 1),
             "python": platform.python_version(), "numpy": np.__version__,
-            "command": build_command(source, out, k, exclude, fits_from, gmm, objective,
-                                     complete if curves is None else curves)}
+            "command": build_command(source, out, k, exclude, fits_from, gmm)}
     arrays["build_info"] = np.array(json.dumps(info))
     save_model(out, arrays)
     return arrays
 
 
-def build_command(source, out, k=DEFAULT_K, exclude=(), fits_from=None, gmm=GMM,
-                  objective: FitObjective = OBJECTIVE, complete=False) -> str:
+def build_command(source, out, k=DEFAULT_K, exclude=(), fits_from=None, gmm=GMM) -> str:
     """The ``mi-dsbrdf build-model`` command line that repeats a build of
     :func:`build_model`'s arguments (files by their names; options only where
     they differ from the defaults)."""
@@ -336,11 +263,6 @@ def build_command(source, out, k=DEFAULT_K, exclude=(), fits_from=None, gmm=GMM,
     words += ["--exclude %s" % n for n in exclude]
     words += ["--fits-from %s" % name(fits_from)] if fits_from is not None else []
     words += ["--gmm %s" % gmm] if gmm != GMM else []
-    if objective.anchor_weight:
-        words += ["--fit-anchor %g --fit-anchor-lobes %s" % (objective.anchor_weight,
-                                                            " ".join(map(str, objective.anchor_lobes)))]
-    if complete is not False:
-        words += ["--complete-unseen" + "".join(" " + c for c in ([] if complete is True else complete))]
     return " ".join(words)
 
 
@@ -348,12 +270,9 @@ def stored_fits(arrays) -> dict:
     """The full fits a model file keeps (``fit_*`` arrays), in the form
     :func:`fit_all` returns and :func:`build_from_fits` takes."""
     a = arrays
-    fits = {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
+    return {"names": [str(n) for n in a["fit_names"]], "controls": a["fit_controls"], "chroma": a["fit_chroma"],
             "error": a["fit_error"], "error_cosine": a["fit_error_cosine"],
             "flags": [f.split("; ") if f else [] for f in a["fit_flags"].tolist()]}
-    if "fit_lower" in a:
-        fits.update(lower=a["fit_lower"], upper=a["fit_upper"])
-    return fits
 
 
 def save_model(path, arrays) -> None:

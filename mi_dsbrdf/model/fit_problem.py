@@ -7,12 +7,12 @@ minimises and how.
 * :class:`FitProblem` — its residuals and analytic Jacobian for log kappa / log
   gamma control values ``ctrl = A p + b`` and per-lobe chromaticity variables;
 * :func:`solve` — Levenberg-Marquardt (:func:`mi_dsbrdf.lm.levenberg_marquardt`)
-  on it with box bounds, a curvature penalty and an optional anchor;
+  on it with box bounds and a curvature penalty;
 * :func:`control_bounds` — the box of the control values (:data:`LOG_KAPPA_BOUNDS`,
   :data:`LOG_GAMMA_BOUNDS`).
 
-The fits themselves (full, basis, constant curves) and what the measurements
-do not see are in :mod:`mi_dsbrdf.model.fitting`.
+The fits themselves (full, basis, constant curves) are in
+:mod:`mi_dsbrdf.model.fitting`.
 """
 from __future__ import annotations
 
@@ -59,15 +59,6 @@ class FitObjective:
     #: flat (Lambertian) floor, exp(kappa) - 1, where the other lobes keep
     #: gamma >= LOG_GAMMA_BOUNDS[0] and stay lobes.
     broad_gamma_min: float = 1e-4
-    #: Weight of a weak pull of every control value towards its lobe's anchor
-    #: (:data:`ANCHORS`), a residual ``anchor_weight * (ctrl - anchor)``. Where
-    #: the data do not see a control value (a faded lobe's gamma, a broad lobe's
-    #: gamma below ~0.01, a faded lobe's kappa) it settles at the anchor instead of
-    #: drifting to a bound or anywhere; where they do see it the pull is negligible.
-    anchor_weight: float = 0.0
-    #: The lobes the anchor holds (0 the broadest, which may instead rest flat on
-    #: ``broad_gamma_min``).
-    anchor_lobes: tuple = (0, 1, 2)
 
     def terms(self):
         """(weight, floor, cosine-weighted) of each active term."""
@@ -85,16 +76,9 @@ class FitObjective:
 
 
 #: The objective of the shipped model's fits: the paper's convention with its own
-#: floor, the cosine term weighted 3x, a broad lobe free to be flat. Chosen on 16
-#: validation materials by ``benchmarks/fit_objective.py``: median Eq. 5 0.249
-#: (paper) and 0.068 (cosine), against 0.403 and 0.056 for the cosine term alone;
-#: heavier cosine weights trade the paper convention for little (6x: 0.272 / 0.066).
+#: floor, the cosine term weighted 3x (it keeps the peak and the diffuse colour at
+#: little cost to the paper convention), a broad lobe free to be flat.
 OBJECTIVE = FitObjective()
-
-#: (log kappa, log gamma) each lobe's control values are pulled towards under
-#: :attr:`FitObjective.anchor_weight`: the medians over the 100 MERL materials of
-#: their unanchored fits' mean control values, rounded (lobe 0 the broadest).
-ANCHORS = ((-2.3, -0.9), (-0.8, 4.5), (0.2, 7.6))
 
 
 # --- its residuals, Jacobian and solver -------------------------------------------------
@@ -178,11 +162,9 @@ def second_differences(n_curves):
     return np.kron(np.eye(n_curves), d2)
 
 
-def solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_iter=100, anchor=0.0,
-          anchor_lobes=(0, 1, 2)):
+def solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_iter=100):
     """Fit ctrl = A p + b and chromaticity variables z from (p0, z0); ``smoothness``
-    weighs second differences of the control values, ``anchor`` their distance
-    to :data:`ANCHORS` (extra residuals, both linear in p).
+    weighs second differences of the control values (extra residuals, linear in p).
 
     Parameters
     ----------
@@ -205,12 +187,6 @@ def solve(problem, A, b, p0, z0, lower=None, upper=None, smoothness=0.0, max_ite
     D2 = second_differences(2 * R) * smoothness
     D = D2 @ A if smoothness else None
     Db = D2 @ b if smoothness else None
-    if anchor:
-        target = np.repeat(np.array(ANCHORS, dtype=np.float64)[:R].reshape(-1), N_CONTROL)
-        rows = np.repeat(np.isin(np.arange(R), anchor_lobes), 2 * N_CONTROL)
-        D_a, Db_a = anchor * A[rows], anchor * (b - target)[rows]
-        D = D_a if D is None else np.vstack([D, D_a])
-        Db = Db_a if Db is None else np.concatenate([Db, Db_a])
 
     def unpack(x):
         return (A @ x[:P] + b).reshape(R, 2, N_CONTROL), x[P:].reshape(R, 2)

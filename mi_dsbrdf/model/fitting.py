@@ -17,9 +17,7 @@ three models with one code path:
   defined where grazing angles leave few samples;
 * ``fit_basis``: coefficients ψ of a learned :class:`~mi_dsbrdf.brdf.curves.CurveBasis`
   (k, default 10) plus 2 chromaticity variables per lobe (16 for k = 10);
-* ``fit_constant``: one value per curve (the starts of ``fit_full``);
-* ``unseen_ranges``: how far each control value of a full fit can move unseen
-  by the measurements (the twenty-seventh session's functional-PCA completion).
+* ``fit_constant``: one value per curve (the starts of ``fit_full``).
 
 Chromaticity c_r is a softmax of (z_r0, z_r1, 0): non-negative, sums to one,
 two free variables per lobe. Lobes are ordered by specularity after fitting:
@@ -36,9 +34,9 @@ import numpy as np
 from mi_dsbrdf.brdf.chromaticity import chroma_logits
 from mi_dsbrdf.brdf.curves import N_CONTROL
 from mi_dsbrdf.brdf.dsbrdf import Material, clamp_controls
-from mi_dsbrdf.evaluation.metrics import material_errors
+from mi_dsbrdf.brdf.log_error import material_errors
 from mi_dsbrdf.model.fit_problem import (LOG_GAMMA_BOUNDS, N_LOBES, OBJECTIVE, FitObjective, FitProblem,
-                                         control_bounds, solve, squared_norm)
+                                         control_bounds, solve)
 from mi_dsbrdf.model.samples import Samples
 
 #: Weight of the curvature penalty (second differences of control values).
@@ -125,8 +123,7 @@ def fit_full(samples: Samples, name=None, smoothness=SMOOTHNESS, max_iter=80,
     lo, hi = control_bounds(N_CONTROL, objective)
     n = 2 * N_LOBES * N_CONTROL
     ctrl, chroma, _, _, iters = solve(problem, np.eye(n), np.zeros(n), ctrl0.reshape(-1), chroma_logits(chroma0),
-                                       lo, hi, smoothness=smoothness, max_iter=max_iter,
-                                       anchor=objective.anchor_weight, anchor_lobes=objective.anchor_lobes)
+                                       lo, hi, smoothness=smoothness, max_iter=max_iter)
     return _result(samples, ctrl, chroma, iters, name or samples.name, problem.knots)
 
 
@@ -141,81 +138,3 @@ def fit_basis(samples: Samples, basis, psi0=None, chroma0=None, name=None, max_i
     ctrl, chroma, x, _, iters = solve(problem, A, basis.mean.reshape(-1), psi0, z0, max_iter=max_iter)
     psi = x[:basis.n_bases]
     return _result(samples, ctrl, chroma, iters, name or samples.name, basis.knots, psi=psi)
-
-
-# --- what the measurements do not see -----------------------------------------------
-
-#: Relative rise of a full fit's objective (data terms only) below which a change
-#: of its control values counts as unseen by the measurements (:func:`unseen_ranges`).
-UNSEEN_TOLERANCE = 1e-3
-
-
-def unseen_ranges(samples: Samples, ctrl, chroma, objective: FitObjective = OBJECTIVE,
-                  tolerance=UNSEEN_TOLERANCE):
-    """The range of each control value of a full fit over which the measurements
-    barely see it: moving that value alone (the others fixed) within the range
-    raises the fit's objective (its data terms, without the curvature penalty
-    or the anchor) by less than ``tolerance`` times its value.
-
-    Seen values get a narrow range (from the Gauss-Newton curvature,
-    +-sqrt(rise / H_jj)); values the data do not see get a wide one, found by
-    doubling steps then bisection on each side, within the fit's bounds: a faded
-    lobe's gamma any value, its kappa anything up to where the lobe shows, a flat
-    broad lobe's gamma anything up to where it stops being flat.
-
-    Parameters
-    ----------
-    samples : Samples
-        The measurements the fit was made to.
-    ctrl : (R, 2, 6) float64
-        The fit's log kappa / log gamma control values.
-    chroma : (R, 3) float64
-        Its lobes' chromaticities.
-
-    Returns
-    -------
-    lower, upper : (R, 2, 6) float64
-        The ranges, ``lower <= ctrl <= upper``.
-    """
-    ctrl = np.asarray(ctrl, dtype=np.float64)
-    problem = FitProblem(samples, ctrl.shape[0], objective=objective)
-    z = chroma_logits(chroma)
-    r0, Jc, _ = problem.residuals(ctrl, z, jac=True)
-    cost0 = squared_norm(r0)
-    rise = tolerance * cost0
-    H = np.einsum("ij,ij->j", Jc, Jc)
-    lo, hi = control_bounds(N_CONTROL, objective)
-    x0 = ctrl.reshape(-1)
-    lower, upper = x0.copy(), x0.copy()
-
-    def seen(j, v):
-        x = x0.copy()
-        x[j] = v
-        return squared_norm(problem.residuals(x.reshape(ctrl.shape), z)[0]) - cost0 > rise
-
-    for j in range(x0.size):
-        half = math.sqrt(rise / H[j]) if H[j] > 0 else math.inf
-        if half < 0.1:                    # seen: the quadratic model is accurate
-            lower[j], upper[j] = max(x0[j] - half, lo[j]), min(x0[j] + half, hi[j])
-            continue
-        for sign, out in ((-1.0, lower), (1.0, upper)):
-            bound = lo[j] if sign < 0 else hi[j]
-            inside, step = x0[j], 0.1
-            while True:                   # doubling steps to the first seen value or the bound
-                v = x0[j] + sign * step
-                if sign * (v - bound) >= 0:
-                    v = bound
-                if seen(j, v):
-                    break
-                inside = v
-                if v == bound:
-                    break
-                step *= 2.0
-            if inside != bound:
-                a, b = inside, v           # unseen at a, seen at b
-                for _ in range(8):
-                    m = 0.5 * (a + b)
-                    a, b = (a, m) if seen(j, m) else (m, b)
-                inside = a
-            out[j] = inside
-    return lower.reshape(ctrl.shape), upper.reshape(ctrl.shape)

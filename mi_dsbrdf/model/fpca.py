@@ -24,8 +24,7 @@ from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, CurveBasis, check_kn
 
 def gram_matrix(knots=DEFAULT_KNOTS) -> np.ndarray:
     """(6, 6) float64 Gram matrix of the spline basis functions over [0, pi/2]
-    (a new array; computed once per knot vector: :func:`complete_unseen` runs
-    functional PCA thousands of times)."""
+    (a new array; computed once per knot vector)."""
     return _gram_matrix(check_knots(knots)).copy()
 
 
@@ -102,45 +101,6 @@ def fpca(controls, knots=DEFAULT_KNOTS) -> FPCA:
     variance = S[:K] ** 2 / (M - 1)
     return FPCA(mean.reshape(R, 2, N_CONTROL), bases.reshape(K, R, 2, N_CONTROL), variance, scores,
                 tuple(knots))
-
-
-def complete_unseen(controls, lower, upper, k, max_iter=3000, tol=1e-4):
-    """Control values completed where the measurements do not see them.
-
-    A full fit's unseen values (a faded lobe's gamma, a flat broad lobe's gamma,
-    :func:`~mi_dsbrdf.model.fitting.unseen_ranges`) rest wherever the fit left
-    them, often on a bound, and functional PCA would spend its first bases on
-    them. Here each material's control values may move within its ranges
-    ``lower``..``upper`` (where they describe the same BRDF, to the ranges'
-    tolerance) towards the ``k``-basis model of all materials: alternating
-    projections between the rank-k reconstruction of :func:`fpca` and the
-    ranges (a clip), until no value moves by more than ``tol`` or after
-    ``max_iter`` rounds (they converge slowly: the 100 MERL fits still move by
-    about 1e-3 after 3000 rounds, about a second).
-
-    Parameters
-    ----------
-    controls, lower, upper : (M, R, 2, 6) float64
-        Control values and their ranges, ``lower <= controls <= upper``.
-    k : int
-        Number of bases of the model the values move towards.
-
-    Returns
-    -------
-    completed : (M, R, 2, 6) float64
-        Within the ranges; equal to ``controls`` where a range is a point.
-    iterations : int
-    """
-    X = np.clip(np.asarray(controls, dtype=np.float64), lower, upper)
-    for it in range(1, max_iter + 1):
-        p = fpca(X)
-        fit = (p.mean.reshape(-1) + p.scores[:, :k] @ p.bases[:k].reshape(k, -1)).reshape(X.shape)
-        new = np.clip(fit, lower, upper)
-        moved = float(np.abs(new - X).max())
-        X = new
-        if moved < tol:
-            break
-    return X, it
 
 
 def l2_inner(a, b, knots=DEFAULT_KNOTS) -> float:

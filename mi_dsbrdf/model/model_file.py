@@ -27,12 +27,8 @@ plus what the build keeps for leave-one-out rebuilds and reports (written by
 :mod:`mi_dsbrdf.model.build`): ``fpca_bases``, ``fpca_variance``, the full fits
 ``fit_names``, ``fit_controls``, ``fit_chroma``, ``fit_flags``, their Eq. 5 errors on
 the fit samples in the paper's and the cosine-weighted convention ``fit_error``,
-``fit_error_cosine``, ``library_error``, ``library_error_cosine``, ``excluded``,
-``fpca_complete_curves`` (present when functional PCA saw the fits' control values
-completed where the measurements do not see them: the curves completed), with it
-``fit_lower``/``fit_upper`` (the ranges) and ``fpca_controls`` (the completed values),
-and ``build_info`` (JSON,
-with the fit objective).
+``fit_error_cosine``, ``library_error``, ``library_error_cosine``, ``excluded``
+and ``build_info`` (JSON, with the fit objective). Other arrays are ignored.
 """
 from __future__ import annotations
 

@@ -36,13 +36,9 @@ class GaussianMixture:
 
     Every method takes ``volume``, the fraction of each component's volume term
     -1/2 log det Sigma_c kept: 1 (the default) is the normalised mixture density;
-    0 ranks the components by weight and Mahalanobis distance alone:
-    as a MAP prior the density rewards tight clusters (in the shipped model
-    log det Sigma is -11.3 for the component of the 48 glossy materials, +2.8
-    and +5.7 for the two broad ones that hold 17 of the 20 near-Lambertian
-    ones: 7-8 nats at their centres, ~2500 of a 3000-pixel posterior at the
-    GMM weight), which pulls diffuse images to glossy materials
-    (``benchmarks/start_diagnosis.py``). Below 1 not a normalised density.
+    0 ranks the components by weight and Mahalanobis distance alone (as a MAP
+    prior the density rewards tight clusters, which pulls diffuse images to
+    glossy materials). Below 1 not a normalised density.
     """
 
     def __init__(self, weights, means, covariances):
@@ -204,9 +200,7 @@ def held_out_nll(X, n_components, covariance_type="full", reg=1e-3, seed=0, n_in
     """(M,) -log p of each row of ``X`` under the mixture fitted to the other rows
     (leave-one-out): how well a structure (components, covariance type, ``reg``)
     predicts a material it has not seen, which is what the prior does at
-    inference (``benchmarks/gmm_selection.py``: BIC's choice, 4 full components,
-    costs a held-out material 23.1 nats in the mean and up to 204, 2 full
-    components with reg 0.01 cost 18.5 and at most 69)."""
+    inference."""
     X = np.asarray(X, dtype=np.float64)
     return np.array([fit_gmm(np.delete(X, i, axis=0), n_components, covariance_type, seed=seed, n_init=n_init,
                              reg=reg)[0].nll(X[i]) for i in range(X.shape[0])])
@@ -315,9 +309,8 @@ class ChromaticityPrior:
     colour), with scipy's Gaussian kernel density and its bandwidth (Scott's
     rule); the gradient is written here. The broad kernel, N(0, BROAD^2 I) with
     the weight of one library material, keeps the tails heavy: with Gaussian
-    kernels alone a lobe far from every library one (a blue lobe on teflon
-    under the quarry probe) cost tens of nats and dragged the whole split with
-    it. ``library_chroma`` (M, R, 3); lobes with a channel below
+    kernels alone a lobe far from every library one costs tens of nats and
+    drags the whole split with it. ``library_chroma`` (M, R, 3); lobes with a channel below
     CHROMA_DEGENERATE are left out of their lobe's density.
     """
 
