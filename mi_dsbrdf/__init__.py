@@ -25,5 +25,6 @@ from mi_dsbrdf.app.recover import recover  # noqa: E402
 from mi_dsbrdf.app.result import Result  # noqa: E402
 
 __version__ = "0.1.0"
-__all__ = ["recover", "Result", "Material", "load_material", "Config", "PRESETS", "MiDsbrdfError", "BackendError", "VariantError",
+__all__ = ["recover", "Result", "Material", "load_material", "Config", "PRESETS",
+           "MiDsbrdfError", "BackendError", "VariantError",
            "MaterialError", "MeasuredFileError", "ModelError", "ConfigError", "InputError", "SceneError"]

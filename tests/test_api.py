@@ -40,7 +40,8 @@ def directional(tmp_path_factory):
     xml = open(scene_path("sphere_directional")).read().replace('name="res" value="128"', 'name="res" value="%d"' % RES)
     (d / "scene.xml").write_text(xml)
     truth = xml.replace('<bsdf type="dsbrdf" id="material"/>',
-                        '<bsdf type="dsbrdf" id="material"><string name="material" value="gold-metallic-paint"/></bsdf>')
+                        '<bsdf type="dsbrdf" id="material">'
+                        '<string name="material" value="gold-metallic-paint"/></bsdf>')
     (d / "truth.xml").write_text(truth)
     img = np.array(mi.render(mi.load_file(str(d / "truth.xml")), spp=64, seed=0), dtype=np.float64)
     write_exr(d / "image.exr", img)
@@ -191,6 +192,7 @@ def test_spot_light_is_a_scene_error(directional, tmp_path, capsys):
     one_line_error(capsys, "SpotLight", "point light")
 
 
+@pytest.mark.slow
 def test_output_folders_never_lose_anything(directional, tmp_path, capsys, monkeypatch):
     d, img = directional
     args = ["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"), "--max-rounds", "1",

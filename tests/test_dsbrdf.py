@@ -40,7 +40,8 @@ def kernel_dr(material, log_cos_h, theta_d, grad=False):
         for p in (lk, lg, ch):
             dr.enable_grad(p)
     R = material.n_lobes
-    sc = lambda a, w: [[dr.gather(mi.Float, a, r * w + j) for j in range(w)] for r in range(R)]
+    def sc(a, w):
+        return [[dr.gather(mi.Float, a, r * w + j) for j in range(w)] for r in range(R)]
     rgb = lobe_rgb(mi.Float(log_cos_h), mi.Float(theta_d), sc(lk, 6), sc(lg, 6), sc(ch, 3), material.knots)
     return rgb, (lk, lg, ch)
 

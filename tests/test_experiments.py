@@ -163,6 +163,7 @@ def test_a_diverged_adam_run_stops_at_its_best_iterate(monkeypatch):
     assert np.isfinite(np.array(mi.traverse(fit["bsdf"])["roughness.value"])).all()
 
 
+@pytest.mark.slow
 def test_the_do_nothing_baseline_is_scored_like_a_method(data, tmp_path):
     """mean-constant: the (leave-one-out) model's mean material under a constant
     map, scored with every measure, in no time."""
@@ -208,6 +209,7 @@ def test_a_case_s_config_overrides_its_rounds(data, tmp_path):
     assert run({"max_rounds": 2})["rounds"] == run({})["rounds"] + 2
 
 
+@pytest.mark.slow
 def test_run_case_scores_a_point_light(data, tmp_path):
     case = tiny({"id": "t", "kind": "point", "material": "gold-metallic-paint", "angle": 40, "priors": True})
     r = ev.run_case(case, data, str(tmp_path / "cache"))

@@ -108,6 +108,7 @@ def test_basis_fit_recovers_psi_and_chromaticity():
 PAPER_CHROME, COS_CHROME, PAPER_WHITE, COS_WHITE = 0.8, 0.25, 0.16, 0.005
 
 
+@pytest.mark.slow
 def test_fits_of_stiff_merl_materials_converge(nbrdf_file):
     """A near-mirror metal and a near-Lambertian fabric: finite, ordered, accurate."""
     for name, paper, cosine in (("chrome", PAPER_CHROME, COS_CHROME), ("white-fabric", PAPER_WHITE, COS_WHITE)):

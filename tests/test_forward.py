@@ -2,6 +2,7 @@
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+import pytest
 
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.lobes import LobeSum
@@ -60,6 +61,7 @@ def psi_derivative(i, env, res, h=1e-2):
     return (psi_texels(PSI + e, env, res).render(env) - psi_texels(PSI - e, env, res).render(env)) / (2 * h)
 
 
+@pytest.mark.slow
 def test_visibility_of_a_non_convex_object_matches_monte_carlo():
     from mi_dsbrdf.app.scenes import scene_path
     env = smooth_map()
@@ -79,6 +81,7 @@ def test_visibility_of_a_non_convex_object_matches_monte_carlo():
     assert err_vis < 0.06 and err_vis < 0.5 * err_none, (err_vis, err_none)
 
 
+@pytest.mark.slow
 def test_forward_mode_jacobian_matches_finite_differences():
     env = smooth_map(8, 16)
     ts = psi_texels(PSI, env, 16)

@@ -47,6 +47,7 @@ def test_a_singular_hessian_is_a_rejected_step_not_an_error():
     assert res.converged and res.iterations == 1 and np.array_equal(res.x, np.ones(2)) and len(calls) == 1
 
 
+@pytest.mark.slow
 def test_reaches_the_cost_of_scipy_least_squares_on_a_merl_fit(nbrdf_file):
     """The basis fit of a MERL material (16 variables): the same residuals minimised
     by this core and by scipy's trust-region least_squares end at the same cost."""

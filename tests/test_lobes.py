@@ -67,7 +67,7 @@ def test_jacobian_matches_forward_mode_ad():
     assert relative(psi_jacobian(model.basis, psi, jac.controls).transpose(2, 1, 0), J[:, :, :k]) < 1e-4
     ref_chroma = J[:, :, k:].reshape(-1, 3, 3, 3)           # (P, channel, lobe, chromaticity channel)
     assert relative(jac.chromaticity, np.stack([ref_chroma[:, c, :, c].T for c in range(3)], axis=1)) < 1e-5
-    off_diagonal = [ref_chroma[:, c, :, l] for c in range(3) for l in range(3) if c != l]
+    off_diagonal = [ref_chroma[:, c, :, k] for c in range(3) for k in range(3) if c != k]
     assert np.abs(off_diagonal).max() == 0
 
 

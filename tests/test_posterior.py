@@ -152,7 +152,8 @@ def test_posterior_illumination_terms_gradient_matches_finite_differences():
         # each pixel) is 0.25 % of the difference with some BLAS builds
         e = np.zeros_like(x)
         e[idx] = 1e-3
-        fd = (post.illumination_terms(x + e, T, seen, bins)[0] - post.illumination_terms(x - e, T, seen, bins)[0]) / 2e-3
+        fd = (post.illumination_terms(x + e, T, seen, bins)[0]
+              - post.illumination_terms(x - e, T, seen, bins)[0]) / 2e-3
         np.testing.assert_allclose(g[idx], fd, rtol=2e-3, atol=1e-3)
 
 

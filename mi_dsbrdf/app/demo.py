@@ -94,6 +94,20 @@ def brdf_errors(material, truth) -> dict:
     return material_errors(material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
 
 
+def map_panels(truth, found, seen, height):
+    """The true and the recovered map as two (height, 2 height, 3) panels for a
+    preview beside images of the object: texels repeated to the panel's size, the
+    recovered map at the truth's scale (the geometric mean of their ratio over the
+    texels both see), each divided by the truth's 90th percentile (a sun clips,
+    the sky stays visible)."""
+    lit = seen & (found.mean(axis=2) > 0) & (truth.mean(axis=2) > 0)
+    scale = float(np.exp(np.mean(np.log(truth[lit].mean(axis=1) / found[lit].mean(axis=1))))) if lit.any() else 1.0
+    level = 0.5 / max(float(np.percentile(truth, 90)), 1e-30)
+    rows = np.arange(height) * truth.shape[0] // height
+    cols = np.arange(2 * height) * truth.shape[1] // (2 * height)
+    return [(m * level)[rows][:, cols].astype(np.float32) for m in (truth, found * scale)]
+
+
 def run(out, material="gold-metallic-paint", res=64, config: Config | str = "fast", spp=256,
         force=False) -> dict:
     """Render, recover (with ``config``, a Config or a preset name) and report into the
@@ -133,8 +147,9 @@ def _run(out, material, res, config, spp) -> dict:
         relit.append(np.array(mi.render(mi.load_dict(p), spp=spp, seed=1), dtype=np.float64))
     lit = relit[0].mean(axis=2) > 1e-2 * relit[0].mean()
     scale_img = np.median(relit[0][lit] / np.maximum(relit[1][lit], 1e-30))
-    save_preview(np.concatenate([image, relit[0].astype(np.float32), (relit[1] * scale_img).astype(np.float32)],
-                                axis=1), os.path.join(out, "comparison.png"))
+    save_preview(np.concatenate([image, *map_panels(sky_truth, sky_found, seen, res), relit[0].astype(np.float32),
+                                 (relit[1] * scale_img).astype(np.float32)], axis=1),
+                 os.path.join(out, "comparison.png"))
     report = {"material": material, "image": [res, res], "map_size": list(map_size),
               "recover_seconds": log["seconds"], "total_seconds": time.perf_counter() - t0,
               **{"brdf_eq20_%s" % c: e for c, e in brdf_errors(found, truth).items()},
@@ -161,10 +176,12 @@ def _markdown(r) -> str:
 A sphere of `{material}` ({image[0]}x{image[1]} pixels) under Mitsuba's `sunsky`,
 recovered with a {map_size[0]}x{map_size[1]} illumination map in {recover_seconds:.0f} s.
 
-![observed | truth relit | recovered relit](comparison.png)
+![observed | true map | recovered map | truth relit | recovered relit](comparison.png)
 
-*Left: the observed image. Middle: the true material under a second sky. Right: the
-recovered material under that sky (overall scale matched: one image cannot fix it).*
+*From the left: the observed image; the true illumination map and the recovered one
+(lat-long, at the truth's scale; texels no pixel sees are black); the true material
+under a second sky, and the recovered material under that sky (overall scale
+matched: one image cannot fix it).*
 
 | measure | value |
 |---|---|

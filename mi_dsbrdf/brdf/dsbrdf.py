@@ -157,8 +157,8 @@ class Material:
         except ValueError as e:
             raise MaterialError(str(e)) from None
         if np.any(self.log_kappa > LOG_KAPPA_MAX + 1e-9):
-            raise MaterialError("kappa must be <= %g (beyond, its derivatives overflow float32); largest control value is %g"
-                                % (KAPPA_MAX, math.exp(self.log_kappa.max())))
+            raise MaterialError("kappa must be <= %g (beyond, its derivatives overflow float32); "
+                                "largest control value is %g" % (KAPPA_MAX, math.exp(self.log_kappa.max())))
         if np.any(self.log_gamma < LOG_GAMMA_MIN - 1e-9) or np.any(self.log_gamma > LOG_GAMMA_MAX + 1e-9):
             raise MaterialError("gamma control values must lie in [%g, %g], got [%g, %g]" % (
                 GAMMA_MIN, GAMMA_MAX, math.exp(self.log_gamma.min()), math.exp(self.log_gamma.max())))

@@ -54,7 +54,8 @@ class TexelSum:
         w, h = (int(v) for v in sensor.film().crop_size())
         self.image_size = (h, w)
         ys, xs = np.mgrid[0:h, 0:w]
-        uv = mi.Point2f(((xs.reshape(-1) + 0.5) / w).astype(np.float32), ((ys.reshape(-1) + 0.5) / h).astype(np.float32))
+        uv = mi.Point2f(((xs.reshape(-1) + 0.5) / w).astype(np.float32),
+                        ((ys.reshape(-1) + 0.5) / h).astype(np.float32))
         rays, _ = sensor.sample_ray(0.0, 0.5, uv, mi.Point2f(0.5, 0.5))
         si = scene.ray_intersect(rays)
         hit = np.array(si.is_valid()) & (np.array(dr.reinterpret_array(mi.UInt32, si.shape)) ==

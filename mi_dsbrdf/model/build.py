@@ -113,7 +113,9 @@ def load_samples(source, name, subset=None):
 
 
 def source_kind(source) -> str:
-    return "MERL .binary files" if os.path.isdir(os.fspath(source)) else "MERL neural fits (NBRDF, Sztrajman et al. 2021)"
+    if os.path.isdir(os.fspath(source)):
+        return "MERL .binary files"
+    return "MERL neural fits (NBRDF, Sztrajman et al. 2021)"
 
 
 # --- per-material work (runs in worker processes) ------------------------------------

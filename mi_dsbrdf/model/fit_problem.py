@@ -149,10 +149,10 @@ class FitProblem:
         J_ctrl = np.empty((T, N, 3, R, 2 * N_CONTROL))
         J_z = np.empty((T, N, 3, R, 2))
         for t in range(T):
-            for l in range(3):
-                coef = w[t, :, l:l + 1] * C[None, :, l]                     # (N, R)
-                J_ctrl[t, :, l] = coef[:, :, None] * F
-                J_z[t, :, l] = (w[t, :, l:l + 1] * L)[:, :, None] * dC[None, :, l, :]
+            for c in range(3):
+                coef = w[t, :, c:c + 1] * C[None, :, c]                     # (N, R)
+                J_ctrl[t, :, c] = coef[:, :, None] * F
+                J_z[t, :, c] = (w[t, :, c:c + 1] * L)[:, :, None] * dC[None, :, c, :]
         return res.reshape(-1), J_ctrl.reshape(T * N * 3, -1), J_z.reshape(T * N * 3, -1)
 
 
