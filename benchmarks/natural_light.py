@@ -498,7 +498,7 @@ def main(argv=None):
     ap.add_argument("--photons", type=float, default=None, metavar="N",
                     help="shot noise: each image as photon counts, N at its mean pixel (Poisson); results under "
                          "<set>-photons<N>/")
-    ap.add_argument("--materials", nargs="*", help="only these materials of the set (validation only)")
+    ap.add_argument("--materials", nargs="*", help="only these materials of the set (a slice)")
     ap.add_argument("--start", type=int, default=None, metavar="I",
                     help="one reflectance start, the I-th of reflectance_starts (0: the mean material), instead "
                          "of the choice among them (validation only)")
@@ -522,7 +522,7 @@ def main(argv=None):
     config = parse_config(args.config)
     if args.fits_from is not None and not os.path.isfile(args.fits_from):
         sys.exit("--fits-from: no model file %s" % args.fits_from)
-    if (config or args.gmm or args.bases or args.materials or args.start is not None
+    if (config or args.gmm or args.bases or args.start is not None
             or args.fits_from) and args.set == "report":     # the truth's sampling is a measure
         sys.exit("settings are chosen on the validation set; the report set runs the shipped defaults")
     if args.start is not None:
