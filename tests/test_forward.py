@@ -130,3 +130,50 @@ def test_point_light_matches_monte_carlo_render():
     # a subset of pixels keeps its per-pixel light directions
     sub = ts.subset(np.arange(0, ts.n_pixels, 7))
     np.testing.assert_allclose(sub.render(np.full((1, 3), 7.0)), far[::7], rtol=1e-6)
+
+
+def test_other_shapes_shadow_the_texel_sum_as_in_monte_carlo():
+    """A wall beside the sphere hides part of the map: with shadow rays through the
+    whole scene the texel sum matches Mitsuba's render, without them it is far off."""
+    env = smooth_map()
+    s = scene({"type": "dsbrdf", "material": "gold-metallic-paint"}, env, spp=2048)
+    wall = mi.load_dict({"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([1.4, 0, 0])
+                         @ mi.ScalarTransform4f().rotate([0, 1, 0], -90) @ mi.ScalarTransform4f().scale(2.0)})
+    s = mi.load_dict({"type": "scene", "integrator": {"type": "direct", "emitter_samples": 2, "bsdf_samples": 2},
+                      "sensor": s.sensors()[0], "object": s.shapes()[0], "emitter": s.emitters()[0], "wall": wall})
+    obj = [sh for sh in s.shapes() if sh.id() == "object"][0]
+    ref = np.array(mi.render(s, seed=3)).reshape(-1, 3)
+    # 4 x 4 directions per texel: the wall's edge crosses texels, whose centres alone
+    # would shadow a pixel in steps of a whole texel
+    shadowed = TexelSum(s, obj, env.shape[:2], visibility=True, samples=4)
+    sel = interior(shadowed.mask).reshape(-1)[shadowed.pixels]
+    r = ref[shadowed.pixels][sel]
+    err = np.abs(shadowed.render(env)[sel] - r) / r
+    assert not shadowed.visibility.all()
+    assert np.mean(err) < 0.03 and np.percentile(err, 95) < 0.08, (np.mean(err), np.percentile(err, 95))
+    unshadowed = TexelSum(s, obj, env.shape[:2], visibility=False, samples=4)
+    assert np.mean(np.abs(unshadowed.render(env)[sel] - r) / r) > 1.0
+    # the fast path weighs the pairs with the same visibility
+    weights = [np.array(LobeSum(v).geometry[2]) for v in (shadowed, unshadowed)]
+    np.testing.assert_array_equal(weights[0] > 0, (weights[1] > 0) & shadowed.visibility.reshape(-1))
+
+
+@pytest.mark.parametrize("light", ["point", "directional"])
+def test_other_shapes_shadow_a_point_or_directional_light_as_in_monte_carlo(light):
+    from test_scene_needs import LIGHT, TOWARDS, blocked_scene
+    s = mi.load_dict(blocked_scene(light, "gold-metallic-paint", res=32))
+    ref = np.array(mi.render(s, spp=256, seed=0)).reshape(-1, 3)
+    obj = [sh for sh in s.shapes() if sh.id() == "object"][0]
+    base = TexelSum(s, obj, (1, 1), visibility=True)
+    ts = base.with_point(LIGHT) if light == "point" else base.with_directions(TOWARDS[None], [1.0])
+    img = ts.render(np.full((1, 3), 40.0 if light == "point" else 3.0))
+    r = ref[ts.pixels]
+    lit = r.mean(axis=1) > 1e-2 * r.mean()
+    facing = (ts.directions * ts.frames[2].T).sum(axis=1) > 0 if light == "point" else ts.frames[2].T @ TOWARDS > 0
+    assert (facing & ~ts.visibility[:, 0]).sum() > 0.2 * facing.sum()       # the card shadows a good part
+    assert np.all(img[~ts.visibility[:, 0]] == 0)
+    assert np.median(np.abs(img[lit] - r[lit]) / r[lit]) < 0.02
+    # the pixels it shadows are dark in the render too, but for the shadow's edge
+    # (the render integrates each pixel's footprint, the texel sum its centre)
+    dark = r.mean(axis=1) < 1e-2 * r.mean()
+    assert np.mean(dark[facing & ~ts.visibility[:, 0]]) > 0.8 and np.mean(dark[facing & ts.visibility[:, 0]]) < 0.1

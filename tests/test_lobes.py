@@ -127,3 +127,21 @@ def test_texel_samples_integrate_each_texel_over_its_footprint(monkeypatch):
     assert relative(ts.with_map_size((4, 8)).render(L), ref) > 0.05
     with pytest.raises(ValueError, match="samples"):
         ts.with_map_size((4, 8), samples=0)
+
+
+def test_transport_shadowed_by_another_shape_matches_the_plugin():
+    """A card shadows the sphere: the fast path weighs each pair with the plain
+    reference's visibility, under a map, a point and a directional light."""
+    from test_scene_needs import LIGHT, TOWARDS, blocked_scene
+    material = model_data.shipped_model().library_material("blue-acrylic")
+    d = blocked_scene("point", res=24)
+    d["object"]["bsdf"] = dsbrdf_bsdf(material)
+    del d["light"]
+    scene = mi.load_dict(d)
+    ts = TexelSum(scene, [s for s in scene.shapes() if s.id() == "object"][0], (8, 16), visibility=True)
+    fast = LobeSum(ts)
+    assert not ts.visibility.all() and relative(fast.transport(material), ts.transport()) < 1e-5
+    for view, lobes in ((ts.with_point(LIGHT), fast.with_point(LIGHT)),
+                        (ts.with_directions(TOWARDS[None], [1.0]), fast.with_directions(TOWARDS[None], [1.0]))):
+        ref = view.render(np.ones((1, 3)))
+        assert not view.visibility.all() and relative(lobes.render(material, np.ones((1, 3))), ref) < 1e-5

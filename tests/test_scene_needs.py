@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf.errors import SceneError
-from mi_dsbrdf.inference.scene_needs import decide
+from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object, other_shapes
 from mi_dsbrdf.app.scenes import scene_path
 
 
@@ -46,3 +46,71 @@ def test_scenes_inference_cannot_handle():
                              "l": {"type": "constant"}})
     with pytest.raises(SceneError, match="envmap, a point or a directional"):
         decide(constant, colour_image())
+
+
+# --- other shapes occlude -------------------------------------------------------
+LIGHT = np.array([2.5, 2.0, 3.0])                 # the point light's position; its direction from the sphere
+TOWARDS = LIGHT / np.linalg.norm(LIGHT)
+
+
+def card(size):
+    """A grey square card (a rectangle, 2 size wide) facing the light at distance 2 from the
+    sphere's centre, shifted up from the line to the light: it shadows the sphere's upper
+    side and is out of the camera's view."""
+    u = np.cross([0.0, 1.0, 0.0], TOWARDS)
+    u /= np.linalg.norm(u)
+    v = np.cross(TOWARDS, u)
+    c = 2.0 * TOWARDS + 0.35 * v
+    to_world = (mi.ScalarTransform4f().look_at(origin=c.tolist(), target=(c + TOWARDS).tolist(), up=v.tolist())
+                @ mi.ScalarTransform4f().scale([size, size, 1.0]))
+    return {"type": "rectangle", "to_world": to_world,
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}}}
+
+
+def blocked_scene(light, material=None, res=40, blocker=True):
+    """A dsbrdf sphere lit by a point light at LIGHT or a directional light from it,
+    with (``blocker``) a card that shadows about a quarter of the sphere's pixels."""
+    from mi_dsbrdf.inference.scene_dicts import camera
+    bsdf = {"type": "dsbrdf"} if material is None else {"type": "dsbrdf", "material": material}
+    d = {"type": "scene", "integrator": {"type": "direct"}, "sensor": camera(res),
+         "object": {"type": "sphere", "bsdf": bsdf}}
+    if light == "point":
+        d["light"] = {"type": "point", "position": LIGHT.tolist(), "intensity": {"type": "rgb", "value": 40.0}}
+    else:
+        d["light"] = {"type": "directional", "direction": (-TOWARDS).tolist(),
+                      "irradiance": {"type": "rgb", "value": 3.0}}
+    if blocker:
+        d["card"] = card(0.5 if light == "point" else 0.65)
+    return d
+
+
+def test_other_shapes_need_visibility_rays_and_are_named():
+    convex_alone = decide(mi.load_dict(blocked_scene("point", blocker=False)), colour_image())
+    assert not convex_alone.visibility and "no other shape" in convex_alone.reasons[2]
+    for light in ("point", "directional"):
+        needs = decide(mi.load_dict(blocked_scene(light)), colour_image())
+        assert needs.visibility and needs.light == light
+        assert needs.reasons[2].startswith("visibility rays: yes") and "card (rectangle)" in needs.reasons[2]
+    # several are counted and named, a shape without an id by its kind
+    d = {"type": "scene", "object": {"type": "sphere", "bsdf": {"type": "dsbrdf"}},
+         "light": {"type": "point", "position": [0, 0, 3]}, "disk": {"type": "disk"}, "more": {"type": "cube"}}
+    needs = decide(mi.load_dict(d), colour_image())
+    assert needs.visibility and "2 other shapes" in needs.reasons[2] and "disk (disk)" in needs.reasons[2]
+    xml = mi.load_string('<scene version="3.0.0"><shape type="sphere"><bsdf type="dsbrdf"/></shape>'
+                         '<shape type="rectangle"/><emitter type="constant"/></scene>')
+    assert other_shapes(xml, dsbrdf_object(xml)) == ["rectangle"]
+
+@pytest.mark.parametrize("light", ["point", pytest.param("directional", marks=pytest.mark.slow)])
+def test_a_card_shadowing_a_quarter_of_the_sphere_leaves_the_light_within_2_degrees(light):
+    """Without shadow rays against the card the recovered light is tens of degrees off."""
+    import dataclasses
+
+    import mi_dsbrdf
+    from mi_dsbrdf.config import preset
+    truth = mi.load_dict(blocked_scene(light, "blue-acrylic"))
+    image = np.array(mi.render(truth, spp=64, seed=0))
+    cfg = dataclasses.replace(preset("fast"), max_rounds=2, block_iters=15)
+    r = mi_dsbrdf.recover(blocked_scene(light), image, config=cfg)
+    assert any("card (rectangle)" in n for n in r.log["needs"])
+    angle = np.degrees(np.arccos(min(1.0, float(np.dot(r.light["direction"], TOWARDS)))))
+    assert angle < 2.0, angle

@@ -6,14 +6,18 @@ surface point x_p is
 
     I_p = sum_t L_t f(d_t, w_p) max(0, n_p . d_t) V(x_p, d_t) Omega_t
 
-(f the BSDF of the object, w_p the direction to the camera, V the visibility,
-only traced for non-convex objects). With ``samples`` s > 1 each texel is
-lit from s x s directions of its footprint, each with its share of the solid
-angle (the sum over t then runs over them, L_t shared): the map as a
-piecewise-constant function of direction, as a camera sees it. From the texel
-centres alone a lobe narrower than the texel spacing sparkles where the image
-is smooth. Unlike Monte Carlo rendering this is
-noise-free, so gradients are exact and the optimiser can use line searches.
+(f the BSDF of the object, w_p the direction to the camera, V the visibility:
+shadow rays from x_p through the whole scene, so that the object shadows itself
+and every other shape shadows it; traced when the object is not convex or other
+shapes are in the scene, :mod:`~mi_dsbrdf.inference.scene_needs` decides).
+Under a point or a directional light V is traced towards the light instead.
+With ``samples`` s > 1 each texel is lit from s x s directions of its
+footprint, each with its share of the solid angle (the sum over t then runs
+over them, L_t shared): the map as a piecewise-constant function of direction,
+as a camera sees it. From the texel centres alone a lobe narrower than the
+texel spacing sparkles where the image is smooth. Unlike Monte Carlo rendering
+this is noise-free, so gradients are exact and the optimiser can use line
+searches.
 Geometry comes from Mitsuba (one ray through each pixel centre); the BSDF is
 the scene's ``dsbrdf`` (or any) Mitsuba BSDF, evaluated by Dr.Jit on
 ``llvm_ad_rgb``, so its parameters get gradients by automatic differentiation.
@@ -44,7 +48,7 @@ class TexelSum:
     scene : mi.Scene with one sensor and the object
     shape : the object (a mi.Shape of the scene)
     map_size : (H, W) of the illumination map
-    visibility : trace shadow rays (non-convex objects)
+    visibility : trace shadow rays through ``scene`` (a non-convex object, other shapes)
     to_world : 4x4 matrix of the envmap's to_world (default identity)
     samples : directions per texel side (s x s per texel, module doc)
     """
@@ -184,16 +188,43 @@ class TexelSum:
         return [(t, min(t + step, self.n_directions)) for t in range(0, self.n_directions, step)]
 
     def _trace_visibility(self, scene):
-        vis = np.zeros((self.n_pixels, self.n_directions), dtype=bool)
+        """(P, n_directions) bool: the light of each pixel-direction pair reaches the
+        surface point, by shadow rays (``scene.ray_test``) through the whole scene,
+        so that the object shadows itself and every other shape shadows it. Pairs
+        with the light or the camera below the surface are left True (their weight
+        is zero). A ray runs towards the direction to infinity (a texel's direction,
+        a directional light), or to the point light's position."""
+        P, nd = self.n_pixels, self.n_directions
+        point = self.light_position is not None
+        n_light = self.directions.shape[0]
+        # All inputs in one array, gathered (no literals, one fresh array): a new
+        # light then runs the same kernel, not a new one (a light search traces
+        # hundreds of point lights)
+        n = np.array(self.si.n, dtype=np.float64)          # the geometric normal offsets the rays
+        target = np.zeros(3) if self.light_position is None else self.light_position
+        buf = mi.Float(np.concatenate([self.positions.reshape(-1), n.reshape(-1), *(f.reshape(-1) for f in self.frames),
+                                       self.directions.T.reshape(-1), target]).astype(np.float32))
+        light0 = 18 * P
+        vis = np.ones((P, nd), dtype=bool)
         for t0, t1 in self._chunks():
-            si, wo, _, _ = self._pairs(t0, t1)
-            if self.light_position is not None:
-                ray = si.spawn_ray_to(mi.Point3f(*(float(v) for v in self.light_position)))
+            nt = t1 - t0
+            lane = dr.arange(mi.UInt32, P * nt)
+            pix = lane // nt
+            per_light = pix if point else lane - pix * nt + dr.opaque(mi.UInt32, t0)
+
+            def vec(first, index, width):
+                return mi.Vector3f(*(dr.gather(mi.Float, buf, index + (first + k) * width) for k in range(3)))
+            si = dr.zeros(mi.SurfaceInteraction3f, P * nt)
+            si.p, si.n = mi.Point3f(vec(0, pix, P)), mi.Normal3f(vec(3, pix, P))
+            frame = mi.Frame3f(vec(6, pix, P), vec(9, pix, P), vec(12, pix, P))
+            wi_z = dr.gather(mi.Float, buf, pix + 17 * P)
+            wo = frame.to_local(vec(0, per_light + light0, n_light))
+            if point:
+                ray = si.spawn_ray_to(mi.Point3f(vec(0, dr.zeros(mi.UInt32, P * nt) + light0 + 3 * n_light, 1)))
             else:
-                ray = si.spawn_ray(si.to_world(wo))
-            blocked = scene.ray_test(ray, (wo.z > 0) & (si.wi.z > 0))
-            vis[:, t0:t1] = ~np.array(blocked).reshape(self.n_pixels, t1 - t0)
-            dr.eval()
+                ray = si.spawn_ray(frame.to_world(wo))
+            blocked = scene.ray_test(ray, (wo.z > 0) & (wi_z > 0))
+            vis[:, t0:t1] = ~blocked.numpy().reshape(P, nt)
         return vis
 
     def _weights(self, si, wo, pix, tex, t0, t1):

@@ -6,7 +6,9 @@ Given the loaded Mitsuba scene, the observed image and its mask, decide:
   directional emitter (direction + intensity by Powell's method, no envmap block);
 * the colour pass: none for a grey image (all channels equal within 0.1 %);
 * visibility rays: none for a convex object (a sphere, a convex mesh, a planar
-  shape), whose surface never shadows itself;
+  shape) alone in the scene, whose surface never shadows itself; otherwise shadow
+  rays through the whole scene, so that a non-convex object shadows itself and
+  every other shape shadows it;
 * the lobes and bases of the reflectance model.
 
 Each decision comes with its reason, printed in the inference log. Errors on
@@ -24,13 +26,15 @@ from mi_dsbrdf.errors import SceneError
 from mi_dsbrdf.plugins import bsdf_classes
 
 GREY_TOLERANCE = 1e-3
+#: other shapes named in the visibility reason (the rest are counted)
+MAX_NAMED = 5
 
 
 @dataclasses.dataclass(frozen=True)
 class SceneNeeds:
     light: str              # "envmap", "point" or "directional"
     colour_pass: bool       # a second, colour pass after the grey one
-    visibility: bool        # trace shadow rays (non-convex object)
+    visibility: bool        # trace shadow rays (non-convex object, or other shapes)
     n_lobes: int
     n_bases: int
     reasons: tuple          # one line per decision, for the log
@@ -73,6 +77,19 @@ def is_convex(shape) -> tuple:
     return False, "%s: convexity unknown, assumed non-convex" % name
 
 
+def other_shapes(scene, obj) -> list:
+    """The shapes of ``scene`` other than ``obj``, each as ``"id (kind)"``, or the
+    kind alone for a shape without an id; they occlude the object's light."""
+    names = []
+    for shape in scene.shapes():
+        if shape == obj:
+            continue
+        kind = str(shape).split("[")[0].strip().lower()
+        sid = shape.id()
+        names.append("%s (%s)" % (sid, kind) if sid and not sid.startswith("_unnamed") else kind)
+    return names
+
+
 def is_grey(image, mask=None, tol=GREY_TOLERANCE) -> bool:
     """True when every masked pixel has equal channels within ``tol`` (relative)."""
     img = np.asarray(image, dtype=np.float64)
@@ -105,8 +122,14 @@ def decide(scene, image, mask=None, n_lobes=3, n_bases=10) -> SceneNeeds:
     grey = is_grey(image, mask)
     reasons.append("colour pass: %s" % ("no (the image is grey)" if grey else "yes (the image has colour)"))
     convex, why = is_convex(obj)
-    if light != "envmap" and convex:
-        why += "; a point light casts no other shadow on it"
-    reasons.append("visibility rays: %s (%s)" % ("no" if convex else "yes", why))
+    others = other_shapes(scene, obj)
+    if others:
+        shown = others[:MAX_NAMED] + (["%d more" % (len(others) - MAX_NAMED)] if len(others) > MAX_NAMED else [])
+        why += "; %s in the scene can shadow it, traced through the whole scene: %s" % (
+            "another shape" if len(others) == 1 else "%d other shapes" % len(others), ", ".join(shown))
+    elif light != "envmap" and convex:
+        why += "; no other shape, so a %s light casts no other shadow on it" % light
+    trace = not convex or bool(others)
+    reasons.append("visibility rays: %s (%s)" % ("yes" if trace else "no", why))
     reasons.append("reflectance: %d lobes, %d bases" % (n_lobes, n_bases))
-    return SceneNeeds(light, not grey, not convex, n_lobes, n_bases, tuple(reasons))
+    return SceneNeeds(light, not grey, trace, n_lobes, n_bases, tuple(reasons))
