@@ -9,6 +9,14 @@
   same image (the recipe of Mitsuba's tutorials, :mod:`mi_dsbrdf.evaluation.adam`);
 * a point light: a 128x128 sphere (target <= 5 s).
 
+``--sizes 128 512 2048 ...`` runs instead the photograph at its own size: a sphere
+covering about half the frame (camera fov 34 degrees) under the sky, rendered by
+Mitsuba (the same samples per 128 px working pixel at every size), recovered from
+its EXR by :func:`mi_dsbrdf.recover` with the defaults and saved (what ``mi-dsbrdf
+recover`` does). It prints each size's time, peak memory, working grid, both
+conventions of Eq. 20 and the map's error side by side, and each one's ratio to the
+128 px run (targets: time <= 1.5x, peak memory <= 1.5 GB more, errors no worse).
+
 Truth: a library material rendered by the deterministic forward model (the sky
 at twice the map's resolution). Each case runs in a fresh process (spawned one
 after the other, never two at once), which reports its wall time and peak
@@ -18,9 +26,10 @@ and ``benchmarks/error_vs_time.py``; the error of these runs is printed as a che
 (the map's, and the BRDF's against the true material in both conventions of Eq. 20).
 
     .venv/bin/python benchmarks/inference_cases.py      # ~3 min
+    .venv/bin/python benchmarks/inference_cases.py --sizes 128 512 1024
 
 Writes benchmarks/results/inference.json (the README quotes it) with the default
-``--out``.
+``--out``; ``--sizes`` writes benchmarks/results/inference_sizes.json.
 """
 import argparse
 import json
@@ -32,6 +41,11 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MATERIAL = "gold-metallic-paint"
 TARGETS = {"envmap_128px_32x64_two_pass": 20.0, "point_light_128px": 5.0}
 MAX_RATIO_TO_ADAM = 1.5
+#: --sizes: the targets against the 128 px run (time ratio, extra peak memory in MB)
+MAX_SIZE_TIME_RATIO, MAX_SIZE_EXTRA_MB = 1.5, 1536
+#: --sizes: camera field of view (degrees; the unit sphere covers about half the frame),
+#: Mitsuba samples per pixel at 128 px (fewer at larger sizes: the same per working pixel)
+SIZE_FOV, SIZE_SPP_128 = 34.0, 2048
 
 
 def envmap_case(res=128):
@@ -98,11 +112,104 @@ def _case(name, queue):
     queue.put(out)
 
 
-def run(name) -> dict:
-    """One case in a fresh process: its figures (seconds, peak_memory_mb, ...)."""
+def _sphere_scene(res, bsdf, sky):
+    import mitsuba as mi
+    from mi_dsbrdf.inference.scene_dicts import camera
+    return {"type": "scene", "integrator": {"type": "direct", "hide_emitters": True},
+            "sensor": camera(res, SIZE_FOV), "object": {"type": "sphere", "bsdf": bsdf},
+            "light": {"type": "envmap", "bitmap": mi.Bitmap(sky)}}
+
+
+def _render_size(res, path, queue):
+    """Render the truth at ``res`` pixels into ``path`` (a process of its own)."""
+    import mitsuba as mi
+    import numpy as np
+
+    import mi_dsbrdf  # noqa: F401
+    from mi_dsbrdf.app.io import write_exr
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    sky = procedural_sky(64, 128).astype(np.float32)
+    spp = max(1, round(SIZE_SPP_128 * (128 / res) ** 2))
+    img = mi.render(mi.load_dict(_sphere_scene(res, {"type": "dsbrdf", "material": MATERIAL}, sky)), spp=spp, seed=1)
+    write_exr(path, np.array(img, dtype=np.float32))
+    queue.put({"spp": spp})
+
+
+def _size_case(res, path, out, queue):
+    """Recover the sphere of ``res`` pixels from its EXR ``path`` and save it into
+    ``out``: seconds, peak memory, working grid and errors."""
+    import resource
+    import time
+
+    import numpy as np
+
+    import mi_dsbrdf
+    from mi_dsbrdf.evaluation.experiment import downsample
+    from mi_dsbrdf.evaluation.metrics import material_errors, scale_invariant_log_error
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    from mi_dsbrdf.model import model_file as model_data
+    from mi_dsbrdf.model.samples import samples_from_function
+
+    sky = procedural_sky(64, 128)
+    scene = _sphere_scene(res, {"type": "dsbrdf"}, sky.astype(np.float32))
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    t0 = time.perf_counter()
+    result = mi_dsbrdf.recover(scene, path)
+    seconds = time.perf_counter() - t0
+    result.save(out)
+    total = time.perf_counter() - t0
+    truth = model_data.shipped_model().library_material(MATERIAL)
+    errors = material_errors(result.material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
+    H, W = result.illumination.shape[:2]
+    errors["map"] = scale_invariant_log_error(result.illumination, downsample(sky, H, W), np.ones((H, W), bool))
+    queue.put({"seconds": seconds, "seconds_with_save": total, "memory_before_mb": before,
+               "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+               "working_grid": result.log["working_grid"], "used_pixels": result.log["used_pixels"],
+               "brdf_eq20": {"paper": errors["paper"], "cosine": errors["cosine"]},
+               "illumination_error": errors["map"]})
+
+
+def run_sizes(sizes, out_json):
+    """``--sizes``: each size rendered, then recovered, in fresh processes, one after
+    the other; the table on stdout and in ``out_json``."""
+    import tempfile
+    sizes = [128] + [s for s in sizes if s != 128]        # the reference first
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for res in sizes:
+            path = os.path.join(tmp, "sphere_%d.exr" % res)
+            rendered = run(_render_size, res, path)
+            results[res] = dict(run(_size_case, res, path, os.path.join(tmp, "result_%d" % res)), **rendered)
+            r, ref = results[res], results[128]
+            r["time_ratio"] = r["seconds"] / ref["seconds"]
+            r["extra_memory_mb"] = r["peak_memory_mb"] - ref["peak_memory_mb"]
+            r["error_ratios"] = {"paper": r["brdf_eq20"]["paper"] / ref["brdf_eq20"]["paper"],
+                                 "cosine": r["brdf_eq20"]["cosine"] / ref["brdf_eq20"]["cosine"],
+                                 "map": r["illumination_error"] / ref["illumination_error"]}
+            g = r["working_grid"]
+            print("%5d px  %6.1f s (%4.2fx)  peak %6.0f MB (%+6.0f)  grid %dx%d /%d  "
+                  "BRDF Eq. 20 paper %.3f (%4.2fx), cosine %.3f (%4.2fx)  map %.3f (%4.2fx)" % (
+                      res, r["seconds"], r["time_ratio"], r["peak_memory_mb"], r["extra_memory_mb"],
+                      g["working"][0], g["working"][1], g["block"], r["brdf_eq20"]["paper"],
+                      r["error_ratios"]["paper"], r["brdf_eq20"]["cosine"], r["error_ratios"]["cosine"],
+                      r["illumination_error"], r["error_ratios"]["map"]), flush=True)
+    print("targets against 128 px: time <= %gx, peak memory <= %+d MB, errors no worse (ratios <= 1)"
+          % (MAX_SIZE_TIME_RATIO, MAX_SIZE_EXTRA_MB))
+    os.makedirs(os.path.dirname(out_json), exist_ok=True)
+    with open(out_json, "w") as f:
+        json.dump({"sizes": {str(k): v for k, v in results.items()}, "material": MATERIAL, "fov": SIZE_FOV,
+                   "targets": {"time_ratio": MAX_SIZE_TIME_RATIO, "extra_memory_mb": MAX_SIZE_EXTRA_MB},
+                   "machine": "%s, %d cores" % (platform.machine(), os.cpu_count()),
+                   "command": "python benchmarks/inference_cases.py --sizes %s" % " ".join(map(str, sizes))},
+                  f, indent=1, sort_keys=True)
+
+
+def run(target, *args) -> dict:
+    """``target(*args, queue)`` in a fresh process: the dict it puts on the queue
+    (seconds, peak_memory_mb, ...)."""
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
-    proc = ctx.Process(target=_case, args=(name, queue))
+    proc = ctx.Process(target=target, args=args + (queue,))
     proc.start()
     out = queue.get()
     proc.join()
@@ -111,10 +218,15 @@ def run(name) -> dict:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "inference.json"),
-                    help="the summary file (default %(default)s)")
+    ap.add_argument("--out", default=None,
+                    help="the summary file (default benchmarks/results/inference.json, with --sizes "
+                         "inference_sizes.json)")
+    ap.add_argument("--sizes", type=int, nargs="+", default=None, metavar="PX",
+                    help="instead: the sphere photographed at each of these sizes (square, pixels)")
     args = ap.parse_args(argv)
-    results = {name: run(name) for name in
+    if args.sizes:
+        return run_sizes(args.sizes, args.out or os.path.join(ROOT, "benchmarks", "results", "inference_sizes.json"))
+    results = {name: run(_case, name) for name in
                ("envmap_128px_32x64_two_pass", "principled_adam_150it_8spp", "point_light_128px",
                 "envmap_128px_32x64_two_pass_all_pixels")}
     ratio = results["envmap_128px_32x64_two_pass"]["seconds"] / results["principled_adam_150it_8spp"]["seconds"]
@@ -127,7 +239,7 @@ def main(argv=None):
             "  BRDF Eq. 20 paper %.3f, cosine %.3f" % (r["brdf_eq20"]["paper"], r["brdf_eq20"]["cosine"])
             if "brdf_eq20" in r else ""))
     print("natural light / principled + Adam: %.2fx (target <= %g)" % (ratio, MAX_RATIO_TO_ADAM))
-    path = args.out
+    path = args.out or os.path.join(ROOT, "benchmarks", "results", "inference.json")
     os.makedirs(os.path.dirname(path), exist_ok=True)
     with open(path, "w") as f:
         json.dump({"runtime": results, "ratio_to_principled_adam": ratio, "targets_seconds": TARGETS,

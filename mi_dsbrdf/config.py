@@ -87,6 +87,13 @@ class Config:
     map_pairs : int, default 8388608
         Pixel-texel pairs a map's posterior works on (>= 64): more usable pixels than
         ``map_pairs`` / texels are subsampled evenly; memory is 12 bytes a pair.
+    working_pixels : int, default 16384
+        The most pixels inference's forward model renders (>= 256, 128 x 128 by default): a
+        larger image is block-averaged to fit, by the smallest integer factor k; a working
+        pixel is used only if all k x k pixels of its block are usable.
+    max_memory : float or None, default None
+        The most memory (GB, > 0) a recovery may need by its estimate, checked before any
+        work; None: the memory available (MemAvailable).
     """
     map_size: tuple = (32, 64)
     max_rounds: int = 3
@@ -111,6 +118,8 @@ class Config:
     grey_texel_samples: int | None = 1
     reflectance_pairs: int = 500_000
     map_pairs: int = 1 << 23
+    working_pixels: int = 128 * 128
+    max_memory: float | None = None
 
     def __post_init__(self):
         try:
@@ -121,7 +130,8 @@ class Config:
             raise ConfigError("map_size %dx%d is too small (at least 2x4)" % (h, w), field="map_size")
         object.__setattr__(self, "map_size", (h, w))
         for name, low in (("max_rounds", 1), ("block_iters", 1), ("illumination_iters", 1), ("map_levels", 1),
-                          ("texel_samples", 1), ("reflectance_pairs", 64), ("map_pairs", 64)):
+                          ("texel_samples", 1), ("reflectance_pairs", 64), ("map_pairs", 64),
+                          ("working_pixels", 256)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError("%s must be an integer >= %d, got %r" % (name, low, value), field=name)
@@ -134,6 +144,11 @@ class Config:
                                   and h > 0):
             raise ConfigError("second_route_highlight must be None or a finite number > 0, got %r" % (h,),
                               field="second_route_highlight")
+        m = self.max_memory
+        if m is not None and not (isinstance(m, (int, float)) and not isinstance(m, bool) and math.isfinite(m)
+                                  and m > 0):
+            raise ConfigError("max_memory must be None or a finite number > 0 (GB), got %r" % (m,),
+                              field="max_memory")
         a = self.gradient_alpha
         if not (isinstance(a, (int, float)) and not isinstance(a, bool) and 0 < a < 1):
             raise ConfigError("gradient_alpha must be a number between 0 and 1 (exclusive), got %r" % (a,),

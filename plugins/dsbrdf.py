@@ -14,7 +14,8 @@ XML (see :func:`mi_dsbrdf.model.library.material_from_params` for all forms)::
 
 Differentiable parameters (``mi.traverse``): ``log_kappa`` and ``log_gamma``
 (R*6 spline control values, lobe-major) or, for a basis material, ``psi``
-(k coefficients); and ``chromaticity`` (R*3, lobe-major). The formula and its
+(k coefficients); and ``chromaticity`` (R*3, lobe-major); an update with a NaN
+or the wrong number of values raises MaterialError. The formula and its
 numerical guards are :func:`mi_dsbrdf.brdf.dsbrdf.lobe_rgb`; sampling is
 :mod:`mi_dsbrdf.brdf.sampling`, with the mixture built from detached parameters so
 that sampled directions do not depend on them.
@@ -25,6 +26,7 @@ import mitsuba as mi
 from mi_dsbrdf.brdf.angles import cos_half_diff, log_cos_h
 from mi_dsbrdf.brdf.curves import N_CONTROL
 from mi_dsbrdf.brdf.dsbrdf import clamp_controls, lobe_curves, lobe_rgb
+from mi_dsbrdf.errors import MaterialError
 from mi_dsbrdf.model.library import material_from_params
 from mi_dsbrdf.brdf.sampling import dsbrdf_weights
 
@@ -62,6 +64,7 @@ class DSBRDF(mi.BSDF):
         callback.put("chromaticity", self.chromaticity, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
+        self._check_parameters()
         if self.basis is not None:
             # Eq. 2-3: control values = mean + sum_i psi_i b_i (keeps the AD graph to psi)
             ctrl = self.basis.control_values_dr(self.psi)
@@ -69,6 +72,23 @@ class DSBRDF(mi.BSDF):
             self.log_kappa, self.log_gamma = clamp_controls(
                 dr.gather(mi.Float, ctrl, mi.UInt32(idx_k)),
                 dr.gather(mi.Float, ctrl, mi.UInt32([i + N_CONTROL for i in idx_k])))
+
+    def _check_parameters(self):
+        """MaterialError for a parameter set through ``mi.traverse`` with the wrong
+        number of values or a NaN (which the evaluation's guards would otherwise
+        clamp silently to a valid material)."""
+        sizes = {"log_kappa": self.n_lobes * N_CONTROL, "log_gamma": self.n_lobes * N_CONTROL,
+                 "chromaticity": self.n_lobes * 3}
+        if self.basis is not None:
+            sizes = {"psi": self.basis.n_bases, "chromaticity": self.n_lobes * 3}
+        for name, size in sizes.items():
+            value = getattr(self, name)
+            if dr.width(value) != size:
+                raise MaterialError("dsbrdf parameter %s needs %d values, got %d" % (name, size, dr.width(value)))
+            nan = int(dr.count(dr.isnan(dr.detach(value)))[0])
+            if nan:
+                raise MaterialError("dsbrdf parameter %s has %d NaN value%s of %d: a material's parameters must be "
+                                    "numbers" % (name, nan, "" if nan == 1 else "s", size))
 
     def _lobe_params(self, detach=False):
         def scalars(arr, width):

@@ -73,6 +73,7 @@ def photo(tmp_path_factory):
 
 # --- 1. the Python API ------------------------------------------------------------
 
+@pytest.mark.slow
 def test_api_recovers_from_arrays_and_saves_the_result_directory(directional, tmp_path):
     d, img = directional
     given = img.copy()
@@ -160,7 +161,7 @@ def test_photograph_of_a_sphere_recovered_end_to_end(photo, tmp_path, capsys):
     from mi_dsbrdf.app.photo import photo_scene
     lit_all_round = np.where(mask[..., None], img + 0.05, 0.0)
     _, circle = photo_scene(lit_all_round)
-    np.testing.assert_allclose(circle, fit_circle(mask), atol=1e-9)
+    np.testing.assert_allclose(circle, fit_circle(mask), atol=0.1)   # two fits: the outline and the mask
     # --sphere and --scene together, or neither, is a usage error in one line
     assert main(["recover", "--image", str(d / "photo.exr"), "--out", str(tmp_path / "o")]) == 1
     one_line_error(capsys, "--sphere")
@@ -218,8 +219,9 @@ def test_output_folders_never_lose_anything(directional, tmp_path, capsys, monke
     def interrupted(*a, **k):
         raise KeyboardInterrupt
     monkeypatch.setattr(result_module, "material_preview", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        main(args + ["--out", str(out), "--force"])
+    capsys.readouterr()
+    assert main(args + ["--out", str(out), "--force"]) == 130
+    assert capsys.readouterr().err.strip().splitlines()[-1] == "mi-dsbrdf: interrupted; nothing written"
     assert {p.name: p.read_bytes() for p in out.iterdir()} == old
     assert not [p for p in os.listdir(tmp_path) if p.startswith(".")]
     monkeypatch.undo()

@@ -13,12 +13,16 @@ def test_config_is_frozen_and_validated():
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.max_rounds = 5
     assert dataclasses.replace(cfg, map_size=[8, 16]).map_size == (8, 16)
+    assert cfg.working_pixels == 128 * 128 and cfg.max_memory is None
+    assert Config(max_memory=4).max_memory == 4 and Config(working_pixels=256).working_pixels == 256
     for bad in (dict(map_size=(1, 8)), dict(map_size="big"), dict(max_rounds=0), dict(block_iters=2.5),
                 dict(tol=0.0), dict(likelihood_scale=float("nan")), dict(log_offset=0.0), dict(w_gmm=-1.0),
                 dict(w_hue=float("inf")), dict(grey_texel_samples=0), dict(second_route_highlight=0),
                 dict(reflectance_pairs=10), dict(map_levels=0), dict(gradient_eps=0.0),
                 dict(gradient_eps=float("nan")), dict(texel_samples=0), dict(texel_samples=2.0),
-                dict(gradient_alpha=1.0), dict(gradient_alpha=0.0), dict(gradient_alpha=True)):
+                dict(gradient_alpha=1.0), dict(gradient_alpha=0.0), dict(gradient_alpha=True),
+                dict(working_pixels=255), dict(working_pixels=1e6), dict(max_memory=0.0),
+                dict(max_memory=float("inf")), dict(max_memory=True), dict(max_memory="4")):
         with pytest.raises(ConfigError) as e:
             Config(**bad)
         name = next(iter(bad))

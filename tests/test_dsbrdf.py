@@ -194,6 +194,10 @@ def test_material_file_round_trip_and_load_material(tmp_path):
     (lambda d: d.pop("log_gamma"), "lacks log_gamma"),
     (lambda d: d.update(format="something-else"), "not a mi-dsbrdf material"),
     (lambda d: d.update(knots=[0, 1, 2]), "knot vector"),
+    (lambda d: d.update(log_kappa=[[1e6] * 6, [0.0] * 6]), r"kappa must be <= 60.*exp\(1e\+06\)"),
+    (lambda d: d.update(log_gamma=[[1e6] * 6, [0.0] * 6]), r"gamma control values .*exp\(1e\+06\)"),
+    (lambda d: d.update(lobes=7), '"lobes": 7 but .* have 2 rows'),
+    (lambda d: d.update(lobes="2"), '"lobes": \'2\''),
 ])
 def test_malformed_material_file(mutate, message, tmp_path):
     d = varying_material().to_dict()

@@ -407,7 +407,7 @@ def test_natural_light_against_table_and_what_the_report_set_refuses(tmp_path):
     assert rows[2].startswith("| new | 2 | 1.25×, 1 |") and rows[2].endswith("| 1 of 1 |")
     assert rows[3].startswith("| ref | 2 | 0.85×, 2 |") and rows[3].endswith("| 0 of 1 |")
     assert "brdf_eq20_paper 1 / 1, illumination_error 0 / 0, relight 0 / 0" in table
-    for bad in (["--materials", "pvc"], ["--config", "texel_samples=2"], ["--gmm", "full:2:0.01"]):
+    for bad in (["--config", "texel_samples=2"], ["--gmm", "full:2:0.01"]):
         with pytest.raises(SystemExit, match="report set runs the shipped defaults"):
             natural_light.main(["--set", "report"] + bad)
 

@@ -129,6 +129,7 @@ def test_texel_samples_integrate_each_texel_over_its_footprint(monkeypatch):
         ts.with_map_size((4, 8), samples=0)
 
 
+@pytest.mark.slow
 def test_transport_shadowed_by_another_shape_matches_the_plugin():
     """A card shadows the sphere: the fast path weighs each pair with the plain
     reference's visibility, under a map, a point and a directional light."""

@@ -264,6 +264,7 @@ def test_a_model_built_in_memory_drives_the_plugin_and_inference():
     assert ts.bsdf is s.shapes()[0].bsdf()         # the caller's view keeps its own BSDF
 
 
+@pytest.mark.slow
 def test_refitted_library_fits_better_and_the_priors_stay_on_the_scores():
     """build_from_fits(refit=True) (what a build does) refits each kept material in
     the basis from its FPCA score: its fit objective is no higher than the score's

@@ -9,6 +9,7 @@ import pytest
 
 from mi_dsbrdf.app.cli import main
 from mi_dsbrdf.app.io import write_exr
+from mi_dsbrdf.app.result import TEXEL_BLOCK
 from mi_dsbrdf.app.scenes import scene_path
 
 RES = 32
@@ -31,11 +32,19 @@ def case(tmp_path_factory):
     return d, img
 
 
-def test_recover_writes_the_result_directory(case, tmp_path):
+def test_recover_writes_the_result_directory(case, tmp_path, capsys):
     d, img = case
     out = tmp_path / "out"
     assert main(["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"), "--out", str(out),
                  "--max-rounds", "2", "--block-iters", "20"]) == 0
+    # progress: what the scene needs first, then one bar per pass with its total, the re-render announced
+    printed = capsys.readouterr()
+    lines = printed.out.splitlines()
+    assert lines[0].startswith("  light: directional") and lines[-1].startswith("recovered in")
+    assert any(line.startswith("  re-rendering ") and " pixels" in line for line in lines)
+    bars = printed.err.replace("\r", "\n")
+    assert "recover: light search" in bars and "/8 [" in bars
+    assert "recover: light pass" in bars and "/2 [" in bars and "<" in bars.split("recover: light pass")[-1]
     for f in ("material.json", "light.json", "log.json", "scene.xml", "input.png", "rerender.png", "residual.png",
               "material.png"):
         assert (out / f).stat().st_size > 0, f
@@ -46,6 +55,17 @@ def test_recover_writes_the_result_directory(case, tmp_path):
     log = json.loads((out / "log.json").read_text())
     assert any("Powell" in n for n in log["needs"])
     assert all(math.isfinite(r["neg_log_posterior"]) for r in log["rounds"])
+    import dataclasses
+
+    import mi_dsbrdf
+    assert log["version"] == mi_dsbrdf.__version__
+    assert mi_dsbrdf.Config(**dict(log["config"], map_size=tuple(log["config"]["map_size"]))) \
+        == mi_dsbrdf.Config(max_rounds=2, block_iters=20)
+    assert set(log["config"]) == {f.name for f in dataclasses.fields(mi_dsbrdf.Config)}
+    assert log["image_size"] == [RES, RES] and log["map_size"] is None        # a directional light: no map
+    assert list(log["stages"]) == ["checks", "inference", "re-render", "save"]
+    for stage in log["stages"].values():
+        assert stage["seconds"] >= 0 and 50 < stage["peak_memory_mb"] < 1e5
     # scene.xml re-renders the input with the recovered material and light, from any working directory
     rerender = np.array(mi.render(mi.load_file(str(out / "scene.xml")), spp=64, seed=1))
     # (log with the likelihood's offset: at 64 spp a dark channel of a lit pixel can render as 0)
@@ -129,9 +149,44 @@ def test_point_light_and_envmap_scenes(tmp_path):
         assert (out / f).stat().st_size > 0, f
     log = json.loads((out / "log.json").read_text())
     assert any("visibility rays: yes" in n for n in log["needs"])
+    assert log["map_size"] == [4, 8] and log["image_size"] == [24, 24]
     env = np.array(mi.Bitmap(str(out / "illumination.exr")))
-    assert env.shape == (4, 8, 3) and np.isfinite(env).all() and np.all(env >= 0)
+    k = TEXEL_BLOCK
+    assert env.shape == (4 * k, 8 * k, 3) and np.isfinite(env).all() and np.all(env >= 0)
+    assert np.array_equal(np.repeat(np.repeat(env[::k, ::k], k, 0), k, 1), env)          # constant blocks
     # the written scene loads (mesh path made absolute, the map beside it) and renders finite pixels
     assert str(tmp_path / "meshes" / "torus.ply") in (out / "scene.xml").read_text()
     rerender = np.array(mi.render(mi.load_file(str(out / "scene.xml")), spp=4))
     assert np.isfinite(rerender).all() and rerender.max() > 0
+
+
+def test_progress_shows_one_bar_per_pass_with_its_total(capsys):
+    """Rows as recover_envmap logs them (a grey pass that converges after 2 rounds, a
+    colour pass, a second route, the answer): one bar per pass, each with its total."""
+    import types
+
+    from mi_dsbrdf import Config
+    from mi_dsbrdf.app.recover import _progress
+    from mi_dsbrdf.inference.reflectance import reflectance_starts
+    from mi_dsbrdf.model.model_file import shipped_model
+    model = shipped_model()
+    starts = len(reflectance_starts(model))
+    report, close = _progress(True, Config(max_rounds=3), types.SimpleNamespace(reasons=("light: envmap",)), model)
+    rows = ([{"pass": "start", "round": i} for i in range(starts)] + [{"pass": "grey", "round": i} for i in range(2)]
+            + [{"pass": "colour", "round": i} for i in range(3)]
+            + [{"pass": "start", "round": i, "route": 1} for i in range(starts)]
+            + [{"pass": "colour", "round": i, "route": 1} for i in range(3)] + [{"pass": "answer", "round": 2}])
+    for row in rows:
+        report(dict(row, neg_log_posterior=1.0, seconds=0.0))
+    close()
+    printed = capsys.readouterr()
+    assert printed.out == "  light: envmap\n"
+    import re
+    ends = {}                       # each bar's last frame: {description: "n/total"}
+    for frame in printed.err.replace("\r", "\n").splitlines():
+        m = re.match(r"(.*): +\d+%\|.*\| (\d+/\d+) \[", frame)
+        if m:
+            ends[m.group(1)] = m.group(2)
+    assert ends == {"recover: starts": "%d/%d" % (starts, starts), "recover: grey pass": "2/3",
+                    "recover: colour pass": "3/3", "recover: second route, starts": "%d/%d" % (starts, starts),
+                    "recover: second route, colour pass": "3/3"}

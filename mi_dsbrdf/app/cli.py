@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
 import re
+import signal
 import sys
 
 import mitsuba as mi
@@ -136,10 +138,8 @@ def cmd_recover(args):
         print("  sphere: centre (%.1f, %.1f) px, radius %.1f px, %s camera, %s light" % (
             circle + ("orthographic" if args.fov is None else "perspective (fov %g)" % args.fov,
                       args.light or "envmap")))
-    result = recover_files(scene, args.image, args.out, mask_file=args.mask, force=args.force,
-                           config=config, srgb=args.srgb)
-    for line in result.log["needs"]:
-        print("  " + line)
+    result = recover_files(scene, args.image, args.out, mask_file=args.mask, force=args.force, config=config,
+                           srgb=args.srgb, white_level=args.white_level)   # prints what the scene needs, the passes
     if result.log.get("unseen_texels"):
         print("  %d illumination texels are seen by no pixel: left black (see illumination.png)"
               % result.log["unseen_texels"])
@@ -227,6 +227,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--image", required=True, help="observed linear HDR image (EXR/HDR), film-sized")
     p.add_argument("--srgb", action="store_true", help="the image is 8-bit sRGB (PNG/JPEG): linearise it")
     p.add_argument("--mask", default=None, help="optional mask image (white = use)")
+    p.add_argument("--white-level", default=None, type=float, nargs="+", metavar="LEVEL",
+                   help="the camera's white level in the image's linear units, one value or three (R G B): pixels "
+                        "with a channel at or above it are left out as clipped (default: plateaus of each "
+                        "channel's maximum)")
     p.add_argument("--out", required=True, help="result directory")
     _config_arguments(p, "default")
     p.add_argument("--force", action="store_true", help="replace an earlier result directory")
@@ -246,11 +250,45 @@ def parser() -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv=None):
-    args = parser().parse_args(argv)
+#: the signals that stop a command as Ctrl-C does (SIGINT): a KeyboardInterrupt,
+#: which removes what the command was writing
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def _stopped_by_signals(received):
+    """SIGTERM and SIGHUP raise KeyboardInterrupt while the block runs (their
+    numbers appended to ``received``); the handlers are restored after. Outside
+    the main thread, where handlers cannot be set, nothing changes."""
+    def stop(signum, frame):
+        received.append(signum)
+        raise KeyboardInterrupt
+    previous = {}
     try:
-        _setup(args.variant)
-        args.func(args)
+        for sig in STOP_SIGNALS:
+            previous[sig] = signal.signal(sig, stop)
+    except ValueError:              # not the main thread
+        pass
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def main(argv=None):
+    """Run the command ``argv`` (default: the process's arguments); returns the exit
+    status: 0, 1 for an error (one line on stderr), 128 + the signal's number for
+    an interruption (Ctrl-C, SIGTERM, SIGHUP), which writes nothing."""
+    args = parser().parse_args(argv)
+    received = []
+    try:
+        with _stopped_by_signals(received):
+            _setup(args.variant)
+            args.func(args)
+    except KeyboardInterrupt:
+        print("mi-dsbrdf: interrupted; nothing written", file=sys.stderr)
+        return 128 + (received[0] if received else signal.SIGINT)
     except (MiDsbrdfError, OSError) as e:
         print("mi-dsbrdf: %s" % e, file=sys.stderr)
         return 1

@@ -23,7 +23,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf import load_material
-from mi_dsbrdf.app.io import read_image, save_preview, staged_output, write_exr
+from mi_dsbrdf.app.io import save_preview, staged_output, write_exr
 from mi_dsbrdf.app.recover import recover_files, resolve_config
 from mi_dsbrdf.app.scenes import camera
 from mi_dsbrdf.config import Config
@@ -132,12 +132,13 @@ def _run(out, material, res, config, spp) -> dict:
     with open(scene_file, "w") as f:
         f.write(scene_xml(res, "placeholder.exr"))
     rec = os.path.join(out, "recovered")
-    log = recover_files(scene_file, os.path.join(out, "observed.exr"), rec, config=config).log
+    result = recover_files(scene_file, os.path.join(out, "observed.exr"), rec, config=config)
+    log = result.log
     # 3. report
     truth = load_material(material)
     found = load_material(os.path.join(rec, "material.json"))
     sky_truth = latlong_of(sunsky(SUN), *map_size)
-    sky_found = read_image(os.path.join(rec, "illumination.exr"))
+    sky_found = result.illumination
     seen = sky_found.mean(axis=2) > 0
     relit = []
     # truth, recovered, and doing nothing: the model's mean material (a bare dsbrdf)

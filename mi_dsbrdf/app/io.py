@@ -7,15 +7,39 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
 import tempfile
+import time
 
 import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.errors import InputError
-from mi_dsbrdf.inference.images import (as_radiance, as_rgb, open_bitmap, read_image,  # noqa: F401 (re-exported)
-                                        srgb_to_linear)
+from mi_dsbrdf.inference import images
+from mi_dsbrdf.inference.images import as_rgb, open_bitmap, srgb_to_linear  # noqa: F401 (re-exported)
+
+#: a staging folder beside a destination older than this (seconds) is a leftover,
+#: whatever became of the process that made it
+STALE_SECONDS = 24 * 3600
+
+
+def as_radiance(pixels, srgb=False, what="image") -> np.ndarray:
+    """:func:`mi_dsbrdf.inference.images.as_radiance`, with ``srgb`` refused for
+    pixels that are not 8- or 16-bit display values (float radiance is linear
+    already: the curve would silently not apply)."""
+    a = np.asarray(pixels)
+    if srgb and a.dtype not in (np.uint8, np.uint16):
+        raise InputError("%s holds %s values, which are linear radiance already: --srgb (srgb=True) linearises "
+                         "8- or 16-bit display values (PNG/JPEG); leave it out" % (what, a.dtype))
+    return images.as_radiance(a, srgb, what)
+
+
+def read_image(path, srgb=False, what="image") -> np.ndarray:
+    """(H, W, 3) float64 linear radiance from an image file (:func:`as_radiance`:
+    an 8- or 16-bit file only with ``srgb``, and ``srgb`` only for one);
+    InputError if missing or unreadable."""
+    return as_radiance(np.array(open_bitmap(path, what)), srgb, "%s %s" % (what, os.fspath(path)))
 
 
 def read_mask(path, shape) -> np.ndarray:
@@ -75,8 +99,14 @@ def _inside(path, folder) -> bool:
 def check_out(out, force=False, ours=(), inputs=()) -> None:
     """InputError unless the folder ``out`` can take a new result: it does not
     exist, or is empty, or (with ``force``) holds only files named in ``ours``
-    (an earlier result); no input file lies inside it; its parent is writable."""
+    (an earlier result); it is not a mount point; no input file lies inside it;
+    its parent can hold the staging folder beside it. Staging folders earlier
+    runs left beside it are removed (:func:`clear_leftovers`)."""
     out = os.fspath(out)
+    if is_mount(out):
+        raise InputError("output %s is a mount point: a result is written beside its folder and renamed into place, "
+                         "which a mount point cannot be; give a folder inside it, e.g. %s"
+                         % (out, os.path.join(out, "result")))
     for f in inputs:
         if f is not None and _inside(f, out):
             raise InputError("output folder %s holds the input %s: choose another output folder, "
@@ -95,6 +125,21 @@ def check_out(out, force=False, ours=(), inputs=()) -> None:
     while not os.path.exists(parent):
         parent = os.path.dirname(parent)
     _probe(parent)
+    clear_leftovers(out)
+
+
+def is_mount(path) -> bool:
+    """Whether ``path`` is a mount point: another file system's root
+    (``os.path.ismount``) or a bind mount (listed in /proc/self/mountinfo)."""
+    path = os.path.abspath(os.fspath(path))
+    if os.path.ismount(path):
+        return True
+    try:
+        with open("/proc/self/mountinfo") as f:
+            points = {re.sub(r"\\([0-7]{3})", lambda m: chr(int(m.group(1), 8)), line.split()[4]) for line in f}
+    except (OSError, IndexError):
+        return False
+    return os.path.realpath(path) in points
 
 
 def _probe(folder) -> None:
@@ -109,50 +154,147 @@ def _probe(folder) -> None:
         raise InputError("cannot write into %s: %s" % (folder, e.strerror)) from None
 
 
+def _staging_prefix(out, kind) -> str:
+    """The name prefix of ``out``'s staging folders of ``kind`` ("partial": the
+    result being written; "old": an earlier result being replaced), with this
+    process's id, which tells a later run whether their writer is alive."""
+    return ".%s.%s-%d-" % (os.path.basename(out), kind, os.getpid())
+
+
+def _alive(pid) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:             # another user's process (EPERM)
+        return True
+    return True
+
+
+def clear_leftovers(out) -> None:
+    """Remove the staging folders (``.NAME.partial-*``, ``.NAME.old-*``) beside
+    ``out`` that earlier runs left (killed while writing): those of a process
+    that has ended, or older than a day (:data:`STALE_SECONDS`). InputError
+    naming the folder for one that may still be written (its process alive, or
+    unknown, and younger than a day), and for an ``.old-*`` folder that holds
+    an earlier result while ``out`` does not exist (a run stopped while
+    replacing it): it is the user's to move back."""
+    out = os.path.abspath(os.fspath(out))
+    parent, name = os.path.split(out)
+    pattern = re.compile(r"^\.%s\.(partial|old)-(?:(\d+)-)?" % re.escape(name))
+    try:
+        entries = os.listdir(parent)
+    except OSError:
+        return
+    for entry in sorted(entries):
+        m = pattern.match(entry)
+        path = os.path.join(parent, entry)
+        if m is None or not os.path.isdir(path) or os.path.islink(path):
+            continue
+        kind, pid = m.group(1), None if m.group(2) is None else int(m.group(2))
+        try:
+            age = time.time() - os.stat(path).st_mtime
+        except OSError:
+            continue
+        if age < STALE_SECONDS and (pid is None or _alive(pid)):
+            raise InputError("%s beside the output is being written by %s: wait for it to finish, or remove "
+                             "that folder if no run is writing %s" % (
+                                 path, "another process (pid %d)" % pid if pid is not None else "an earlier run",
+                                 out))
+        if kind == "old" and not os.path.exists(out) and os.path.exists(os.path.join(path, "result")):
+            raise InputError("a run was stopped while replacing %s: the earlier result is in %s; move it back to %s "
+                             "or remove it" % (out, os.path.join(path, "result"), out))
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def umask() -> int:
+    """The process's file-mode creation mask (read without changing it where
+    /proc tells it)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def staged_output(out, force=False, ours=(), inputs=()):
     """Write a result folder all at once: yields a fresh folder beside ``out``,
     which replaces ``out`` only when the block finishes (:func:`check_out` first).
+    The folder gets the permissions of a folder the user makes (0777 less the
+    umask).
 
-    An error or an interruption leaves ``out`` as it was (an earlier result
-    whole, or nothing) and no partial folder behind.
+    An error or an interruption (an exception, KeyboardInterrupt included)
+    leaves ``out`` as it was (an earlier result whole, or nothing) and no
+    staging folder behind.
     """
     check_out(out, force, ours, inputs)
     out = os.path.abspath(os.fspath(out))
     parent = os.path.dirname(out)
+    made = parent                       # the highest folder made here (removed again if the block fails)
+    while not os.path.exists(os.path.dirname(made)):
+        made = os.path.dirname(made)
+    made = None if os.path.exists(made) else made
     try:
         os.makedirs(parent, exist_ok=True)
-        tmp = tempfile.mkdtemp(prefix=".%s.partial-" % os.path.basename(out), dir=parent)
+        tmp = tempfile.mkdtemp(prefix=_staging_prefix(out, "partial"), dir=parent)
     except OSError as e:
         raise InputError("cannot write into %s: %s" % (parent, e.strerror)) from None
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     old = None
-    if os.path.exists(out):
-        old = tempfile.mkdtemp(prefix=".%s.old-" % os.path.basename(out), dir=parent)
-        os.rename(out, os.path.join(old, "result"))
-    os.rename(tmp, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+    try:
+        os.chmod(tmp, 0o777 & ~umask())
+        yield tmp
+        if os.path.exists(out):
+            old = tempfile.mkdtemp(prefix=_staging_prefix(out, "old"), dir=parent)
+            os.rename(out, os.path.join(old, "result"))
+        try:
+            os.rename(tmp, out)
+        except OSError as e:
+            raise InputError("cannot move the result into place at %s: %s" % (out, e.strerror)) from None
+    finally:
+        if old is not None and not os.path.exists(out) and os.path.isdir(os.path.join(old, "result")):
+            os.rename(os.path.join(old, "result"), out)         # the earlier result back in place
+        shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None and os.path.exists(out):
+            shutil.rmtree(old, ignore_errors=True)
+        if made is not None and not os.path.exists(out):
+            _remove_empty(parent, made)
+
+
+def _remove_empty(folder, top) -> None:
+    """Remove ``folder`` and its parents up to ``top`` while they are empty."""
+    while True:
+        try:
+            os.rmdir(folder)
+        except OSError:
+            return
+        if folder == top:
+            return
+        folder = os.path.dirname(folder)
 
 
 def staged_file(out_file, force=False):
     """A temporary name beside ``out_file`` to write to, then ``os.replace`` it into
-    place (InputError if ``out_file`` exists without ``force``, is a folder, or
-    its folder does not exist or is not writable)."""
+    place (InputError if ``out_file`` has no extension (the writer's format), exists
+    without ``force``, is a folder, or its folder does not exist or is not
+    writable)."""
     out_file = os.path.abspath(os.fspath(out_file))
     if os.path.isdir(out_file):
         raise InputError("output %s is a folder: give a file name" % out_file)
+    stem, ext = os.path.splitext(os.path.basename(out_file))
+    if not ext:
+        raise InputError("output %s has no extension: give a file name ending in its format (.exr, .png)" % out_file)
     if os.path.exists(out_file) and not force:
         raise InputError("%s exists; pass --force to replace it" % out_file)
     folder = os.path.dirname(out_file)
     if not os.path.isdir(folder):
         raise InputError("folder %s of the output does not exist" % folder)
     _probe(folder)
-    stem, ext = os.path.splitext(os.path.basename(out_file))
     return os.path.join(folder, ".%s.partial%s" % (stem, ext))
 
 

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import os
+import xml.etree.ElementTree as ET
 
 import mitsuba as mi
 import numpy as np
@@ -26,7 +27,8 @@ def write_scene_xml(source, out_file, light, material_file) -> None:
     (direction: object -> light). File names in the written scene are relative
     to the folder of ``material_file`` (the result's folder); relative file names
     of the input scene (meshes, textures) are made absolute so that the new scene
-    loads from its own folder."""
+    loads from its own folder. Objects keep their ids (a dict's: the keys of the
+    scene's own entries), so that ``relight --shape-id`` finds them."""
     config = mi.parser.ParserConfig(mi.variant())
     if isinstance(source, dict):
         base, state = os.getcwd(), mi.parser.parse_dict(config, source)
@@ -34,6 +36,7 @@ def write_scene_xml(source, out_file, light, material_file) -> None:
         base = os.path.dirname(os.path.abspath(os.fspath(source)))
         state = mi.parser.parse_file(config, os.fspath(source))
     folder = os.path.dirname(os.path.abspath(material_file))
+    ids = _kept_ids(state, isinstance(source, dict))
     for node in state.nodes:
         props = node.props
         if props.plugin_name() in ("dsbrdf", "merl") and node.type == mi.ObjectType.Unknown:
@@ -59,7 +62,41 @@ def write_scene_xml(source, out_file, light, material_file) -> None:
             name = props["filename"]
             if not os.path.isabs(name) and os.path.exists(os.path.join(base, name)):
                 props["filename"] = os.path.join(base, name)
+    for i, name in ids.items():        # Mitsuba's writer drops ids: carried as a property, restored below
+        state.nodes[i].props[_ID_PROPERTY] = name
     mi.parser.write_file(state, os.fspath(out_file))
+    _restore_ids(out_file)
+
+
+#: the property that carries an object's id through Mitsuba's XML writer
+_ID_PROPERTY = "mi_dsbrdf_object_id"
+
+
+def _kept_ids(state, from_dict) -> dict:
+    """{node index: id} of the objects whose ids the written scene keeps: every
+    id of a scene file; of a dict, the keys of the scene's own entries (a nested
+    dict's key, "bsdf" or "film", is a property name, not an id)."""
+    if from_dict:
+        root = state.nodes[0].props
+        indices = [root[k].index() for k in root.keys() if root.type(k) == mi.Properties.Type.ResolvedReference]
+    else:
+        indices = range(len(state.nodes))
+    return {i: state.nodes[i].props.id() for i in indices if state.nodes[i].props.id()}
+
+
+def _restore_ids(xml_file) -> None:
+    """Turn each ``<string name=_ID_PROPERTY value=ID/>`` of ``xml_file`` into its
+    parent's ``id="ID"``."""
+    tree = ET.parse(xml_file)
+    for parent in tree.iter():
+        for child in list(parent):
+            if child.tag == "string" and child.get("name") == _ID_PROPERTY:
+                parent.remove(child)
+                parent.set("id", child.get("value"))
+                if not len(parent) and not (parent.text or "").strip():
+                    parent.text = None
+    ET.indent(tree, space="    ")
+    tree.write(xml_file, encoding="unicode")
 
 
 def material_preview(material_file, path, res=96, spp=64) -> None:

@@ -6,6 +6,7 @@ directory (see :mod:`mi_dsbrdf.app.result`) is written whole or not at all.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 
@@ -14,14 +15,17 @@ import numpy as np
 from tqdm import tqdm
 
 from mi_dsbrdf.app.io import as_mask, as_radiance, check_image, check_out, read_image, read_mask
-from mi_dsbrdf.app.result import RESULT_FILES, Result
+from mi_dsbrdf.app.result import RESULT_FILES, Result, stage_row
+from mi_dsbrdf.app.memory import check_memory, memory_needs
+from mi_dsbrdf.app.working_grid import (WorkingGrid, rerender as grid_rerender, usable_blocks, working_grid,
+                                        working_scene)
 from mi_dsbrdf.config import PRESETS, Config, preset
-from mi_dsbrdf.errors import InputError
+from mi_dsbrdf.errors import InputError, SceneError
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
-from mi_dsbrdf.inference.light import recover_light
-from mi_dsbrdf.inference.lobes import LobeSum
-from mi_dsbrdf.inference.pixels import usable_pixels
+from mi_dsbrdf.inference.light import SEARCH_KEEP, recover_light
+from mi_dsbrdf.inference.pixels import below_white, white_levels
+from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
 from mi_dsbrdf.model.model_file import shipped_model
 
@@ -44,7 +48,8 @@ def resolve_config(config) -> Config:
     return config
 
 
-def recover(scene, image, mask=None, config: Config | str = None, progress=None, srgb=False) -> Result:
+def recover(scene, image, mask=None, config: Config | str = None, progress=None, srgb=False,
+            white_level=None) -> Result:
     """Recover the reflectance and the light of one image of known geometry.
 
     Parameters
@@ -58,10 +63,15 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
         maximum is used)
     config : :class:`~mi_dsbrdf.config.Config`, or the name of a preset
         (``"default"``, ``"fast"``: :data:`~mi_dsbrdf.config.PRESETS`); default ``Config()``
-    progress : None (quiet), True (a tqdm bar per round) or a callable given each
-        logged round (a dict)
+    progress : None (quiet); True: what the scene needs printed before the work,
+        a tqdm bar per pass (its total and ETA), the final re-render announced;
+        or a callable given each logged round (a dict)
     srgb : linearise an 8-bit image (file or uint8 array) from sRGB instead of
         refusing it
+    white_level : the camera's white level in the image's (linear) units: one
+        number, or one per channel (R, G, B); pixels with a channel at or above it
+        are left out as clipped. Without it, clipping is found as plateaus of each
+        channel's maximum (:mod:`mi_dsbrdf.inference.pixels`)
 
     Returns
     -------
@@ -71,31 +81,43 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     ------
     InputError, SceneError, ConfigError : bad input, with a one-line message.
     """
+    began = time.perf_counter()
     cfg = resolve_config(config)
+    levels = white_levels(white_level)
     scene, source = _scene(scene)
+    # the memory the settings need, priced before the image is read (ConfigError if over)
+    envmap, shadows = memory_needs(scene)
+    check_memory(cfg, WorkingGrid.of(scene.sensors()[0].film().crop_size(), cfg.working_pixels), envmap, shadows)
     obs, user_mask = load_inputs(image, mask, srgb)
     film = scene.sensors()[0].film().crop_size()
     h, w = obs.shape[:2]
     if (w, h) != (int(film[0]), int(film[1])):
         raise InputError("%s is %dx%d but the scene's film is %dx%d" % (_name(image), w, h, film[0], film[1]))
     model = shipped_model()
-    needs = decide(scene, obs, user_mask, model.basis.n_lobes, model.basis.n_bases)
     obj = dsbrdf_object(scene)
-    ts = TexelSum(scene, obj, cfg.map_size if needs.envmap_block else (1, 1), visibility=needs.visibility,
+    # a film of more than cfg.working_pixels pixels: inference on its block means
+    # (mi_dsbrdf.app.working_grid); else on the image itself
+    grid, on_object = working_grid(scene, obj, user_mask, cfg.working_pixels)
+    work = grid.mean(obs)
+    needs = decide(scene, work, None if user_mask is None else grid.all(user_mask), model.basis.n_lobes,
+                   model.basis.n_bases)
+    ts = TexelSum(working_scene(scene, grid), obj, cfg.map_size if needs.envmap_block else (1, 1),
+                  visibility=needs.visibility,
                   samples=cfg.texel_samples if needs.envmap_block else 1)     # the re-render as inference saw it
-    keep = usable_pixels(ts.mask, obs, user_mask)
+    keep = usable_blocks(grid, ts.mask, on_object, obs, below_white(obs, levels, user_mask))
     if keep.sum() < MIN_PIXELS:
         raise InputError("only %d usable pixels (on the object, inside the mask, unsaturated, off the silhouette); "
                          "inference needs at least %d: use a larger image or mask" % (int(keep.sum()), MIN_PIXELS))
-    report, close = _progress(progress)
+    stages = {"checks": stage_row(began)}
+    report, close = _progress(progress, cfg, needs, model)
     t0 = time.perf_counter()
     try:
         if needs.envmap_block:
-            rec = recover_envmap(ts, obs, keep, model, cfg, colour=needs.colour_pass, progress=report)
+            rec = recover_envmap(ts, work, keep, model, cfg, colour=needs.colour_pass, progress=report)
             light, lit, L = None, ts, rec.illumination.reshape(-1, 3)
         else:
             point = (centre(obj), point_light_distance(scene, obj)) if needs.light == "point" else None
-            rec = recover_light(ts, obs, keep, model, cfg, progress=report, point=point, colour=needs.colour_pass)
+            rec = recover_light(ts, work, keep, model, cfg, progress=report, point=point, colour=needs.colour_pass)
             light = {"type": needs.light, "direction": [float(v) for v in rec.light["direction"]],
                      "intensity": float(rec.light["intensity"])}
             if point is not None:
@@ -106,25 +128,35 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
             L = np.full((1, 3), rec.light["intensity"])
     finally:
         close()
-    rerender = np.zeros_like(obs)
-    rerender.reshape(-1, 3)[lit.pixels] = LobeSum(lit).render(rec.material, L)
+    stages["inference"] = stage_row(t0)
+    t1 = time.perf_counter()
+    if progress is True:
+        print("  re-rendering %d pixels under the recovered material and light" % (
+            len(lit.pixels) if on_object is None else int(on_object.sum())), flush=True)
+    rerender = grid_rerender(grid, lit, rec.material, L, cfg.map_pairs, on_object)
+    stages["re-render"] = stage_row(t1)
     rows = rec.log
-    log = {"scene": source if isinstance(source, str) else None,
+    from mi_dsbrdf import __version__
+    log = {"version": __version__, "config": dataclasses.asdict(cfg),
+           "scene": source if isinstance(source, str) else None,
            "image": os.fspath(image) if isinstance(image, (str, os.PathLike)) else None,
-           "needs": list(needs.reasons), "rounds": rows, "used_pixels": int(keep.sum()),
+           "image_size": [w, h], "map_size": list(cfg.map_size) if needs.envmap_block else None,
+           "stages": stages, "needs": list(needs.reasons), "rounds": rows, "used_pixels": int(keep.sum()),
+           "working_grid": grid.log(),
            "seconds": rec.seconds if rows else time.perf_counter() - t0,
            "unseen_texels": rows[-1].get("unseen_texels") if rows else None}
     return Result(material=rec.material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
-                  image=obs, used=keep, rerender=rerender, scene_source=source)
+                  image=obs, used=grid.repeat(keep), rerender=rerender, scene_source=source)
 
 
 def recover_files(scene_file, image_file, out, mask_file=None, force=False, config: Config | str = None,
-                  progress=True, srgb=False) -> Result:
+                  progress=True, srgb=False, white_level=None) -> Result:
     """:func:`recover` from files, then :meth:`Result.save` into ``out`` (checked first,
     so that a bad output folder fails before the work)."""
     inputs = [f for f in (scene_file, image_file, mask_file) if isinstance(f, (str, os.PathLike))]
     check_out(out, force, RESULT_FILES, inputs)
-    result = recover(scene_file, image_file, mask=mask_file, config=config, progress=progress, srgb=srgb)
+    result = recover(scene_file, image_file, mask=mask_file, config=config, progress=progress, srgb=srgb,
+                     white_level=white_level)
     result.save(out, force=force, inputs=inputs)
     return result
 
@@ -147,7 +179,18 @@ def _name(image) -> str:
 
 
 def _scene(scene):
-    """(mi.Scene, its source: the path, the dict, or None)."""
+    """(mi.Scene, its source: the path, the dict, or None); SceneError if it has no
+    camera."""
+    loaded, source = _load_scene(scene)
+    if not loaded.sensors():
+        raise SceneError("the scene has no sensor: add the camera that took the image, its film the image's size "
+                         "(e.g. <sensor type=\"perspective\"> with a <film type=\"hdrfilm\">)")
+    return loaded, source
+
+
+def _load_scene(scene):
+    """(mi.Scene, its source) of a path, a dict or an mi.Scene (InputError if it
+    does not load)."""
     if isinstance(scene, mi.Scene):
         return scene, None
     if isinstance(scene, dict):
@@ -174,19 +217,52 @@ def _image(image, srgb) -> np.ndarray:
     return as_radiance(image, srgb, "image (a %s array)" % np.asarray(image).dtype)
 
 
-def _progress(progress):
-    """(called with each logged row, closes the bar)."""
+#: the progress bar of each logged pass: {pass: (description, unit)}
+PASSES = {"start": ("starts", "start"), "grey": ("grey pass", "round"), "colour": ("colour pass", "round"),
+          "light search": ("light search", "direction"), "light": ("light pass", "round")}
+
+
+def _progress(progress, cfg, needs, model):
+    """(report, close): ``report`` is called with each logged row, ``close`` when
+    inference ends. ``progress`` None/False: quiet; a callable: it is ``report``;
+    True: the scene's needs printed first, then one tqdm bar per pass with its
+    total (the starts, ``cfg.max_rounds`` rounds, the light search's directions)
+    and an ETA. A pass that converges early ends its bar below the total."""
     if progress is None or progress is False:
         return None, lambda: None
     if callable(progress):
         return progress, lambda: None
-    bar = tqdm(desc="recover", unit="round")
+    for line in needs.reasons:
+        print("  " + line, flush=True)
+    totals = {"start": len(reflectance_starts(model)), "grey": cfg.max_rounds, "colour": cfg.max_rounds,
+              "light search": SEARCH_KEEP + 2, "light": cfg.max_rounds}
+    state = {"bar": None, "pass": None, "since": time.time()}
+
+    def close():
+        if state["bar"] is not None:
+            # ends as of its last row (a pass is known to end when the next one's first row comes)
+            bar, shift = state["bar"], time.time() - state["since"]
+            bar.start_t, bar.last_print_t = bar.start_t + shift, bar.last_print_t + shift
+            bar.close()
+        state["bar"] = state["pass"] = None
 
     def report(row):
-        bar.set_description("recover, second route" if row.get("route") else "recover", refresh=False)
-        bar.set_postfix(nlp="%.4g" % row["neg_log_posterior"], refresh=False)
-        bar.update()
-    return report, bar.close
+        name = row.get("pass")
+        key = (row.get("route", 0), name)
+        if name not in PASSES:              # the answer's row: no pass of its own
+            close()
+            return
+        if key != state["pass"]:
+            close()
+            desc, unit = PASSES[name]
+            bar = tqdm(total=totals[name], desc="recover: " + ("second route, " if key[0] else "") + desc,
+                       unit=unit)
+            bar.start_t = bar.last_print_t = state["since"]     # the pass began with the last one's row
+            state["bar"], state["pass"] = bar, key
+        state["bar"].set_postfix(nlp="%.4g" % row["neg_log_posterior"], refresh=False)
+        state["bar"].update()
+        state["since"] = time.time()        # tqdm's clock
+    return report, close
 
 
 def centre(shape) -> np.ndarray:

@@ -41,11 +41,17 @@ def render_to_files(scene_file, out, spp=None, force=False, **params) -> dict:
     t0 = time.perf_counter()
     img = render_scene(scene_file, spp=spp, **params)
     seconds = time.perf_counter() - t0
+    made = not os.path.exists(out)
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
         raise InputError("cannot make the output folder %s: %s" % (out, e.strerror)) from None
-    write_files(img, stem + ".exr", force)
+    try:
+        write_files(img, stem + ".exr", force)
+    except BaseException:
+        if made and not os.listdir(out):
+            os.rmdir(out)               # an error or an interruption leaves no empty folder behind
+        raise
     return {"exr": stem + ".exr", "png": stem + ".png", "seconds": seconds}
 
 
@@ -78,6 +84,7 @@ def relight(material, out_file, envmap=None, shape="sphere", scene=None, shape_i
     not used). ``material``: a material.json or a library name. Both files
     appear only when the render succeeded.
     """
+    check_exr_name(out_file)
     bsdf = material_dict(material)
     spp = _positive(spp, "spp")
     if scene is not None:
@@ -107,6 +114,14 @@ def relight(material, out_file, envmap=None, shape="sphere", scene=None, shape_i
     return {"exr": os.fspath(out_file), "png": png, "seconds": seconds}
 
 
+def check_exr_name(out_file) -> None:
+    """InputError unless ``out_file`` names an EXR file (``.exr``): the image is
+    float radiance, and its PNG preview takes the same name with ``.png``."""
+    if os.path.splitext(os.fspath(out_file))[1].lower() != ".exr":
+        raise InputError("output %s: give a file name ending in .exr (the PNG preview is written beside it)"
+                         % os.fspath(out_file))
+
+
 def material_dict(material) -> dict:
     """The ``dsbrdf`` plugin dict of a material.json or a library name, the
     material loaded and checked here first (one-line MaterialError/InputError)."""
@@ -120,12 +135,14 @@ def material_dict(material) -> dict:
 
 
 def check_envmap(path) -> None:
-    """InputError unless ``path`` is a lat-long map of finite, non-negative radiance."""
+    """InputError unless ``path`` is a lat-long map of finite, non-negative radiance:
+    twice as wide as high (within 1 %) and at least 4x2 texels."""
     L = read_image(path, what="envmap")
     check_radiance(L, "envmap %s" % os.fspath(path), unit="texel")
-    if L.shape[1] < 2 * L.shape[0] - 2 or L.shape[1] > 2 * L.shape[0] + 2:
-        raise InputError("envmap %s is %dx%d: a lat-long map is twice as wide as high" % (
-            os.fspath(path), L.shape[1], L.shape[0]))
+    h, w = L.shape[:2]
+    if h < 2 or abs(w - 2 * h) > 0.02 * h:
+        raise InputError("envmap %s is %dx%d: a lat-long map is twice as wide as high, at least 4x2"
+                         % (os.fspath(path), w, h))
 
 
 def scene_with_material(scene_file, shape_id, bsdf) -> "mi.Scene":

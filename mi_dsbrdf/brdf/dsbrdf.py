@@ -158,10 +158,10 @@ class Material:
             raise MaterialError(str(e)) from None
         if np.any(self.log_kappa > LOG_KAPPA_MAX + 1e-9):
             raise MaterialError("kappa must be <= %g (beyond, its derivatives overflow float32); "
-                                "largest control value is %g" % (KAPPA_MAX, math.exp(self.log_kappa.max())))
+                                "largest control value is %s" % (KAPPA_MAX, _exp_text(self.log_kappa.max())))
         if np.any(self.log_gamma < LOG_GAMMA_MIN - 1e-9) or np.any(self.log_gamma > LOG_GAMMA_MAX + 1e-9):
-            raise MaterialError("gamma control values must lie in [%g, %g], got [%g, %g]" % (
-                GAMMA_MIN, GAMMA_MAX, math.exp(self.log_gamma.min()), math.exp(self.log_gamma.max())))
+            raise MaterialError("gamma control values must lie in [%g, %g], got [%s, %s]" % (
+                GAMMA_MIN, GAMMA_MAX, _exp_text(self.log_gamma.min()), _exp_text(self.log_gamma.max())))
         check_chromaticity(self.chromaticity)
         self.name = name
         self.psi = None if psi is None else np.asarray(psi, dtype=np.float64).reshape(-1)
@@ -230,10 +230,15 @@ class Material:
         if missing:
             raise MaterialError("%s lacks %s" % (source, ", ".join(missing)))
         try:
-            return cls(d["log_kappa"], d["log_gamma"], d["chromaticity"], knots=d.get("knots", DEFAULT_KNOTS),
-                       name=d.get("name"), psi=d.get("psi"))
+            m = cls(d["log_kappa"], d["log_gamma"], d["chromaticity"], knots=d.get("knots", DEFAULT_KNOTS),
+                    name=d.get("name"), psi=d.get("psi"))
         except MaterialError as e:
             raise MaterialError("%s: %s" % (source, e)) from None
+        lobes = d.get("lobes", m.n_lobes)
+        if not isinstance(lobes, int) or isinstance(lobes, bool) or lobes != m.n_lobes:
+            raise MaterialError("%s: \"lobes\": %r but log_kappa, log_gamma and chromaticity have %d row%s"
+                                % (source, lobes, m.n_lobes, "" if m.n_lobes == 1 else "s"))
+        return m
 
     def save(self, path) -> None:
         with open(path, "w") as f:
@@ -264,6 +269,11 @@ def check_chromaticity(c, tol=1e-4) -> np.ndarray:
     if np.any(np.abs(sums - 1.0) > tol):
         raise MaterialError("each lobe's chromaticity must sum to 1, got sums %s" % np.round(sums, 6).tolist())
     return c
+
+
+def _exp_text(log_value) -> str:
+    """exp(``log_value``) as text, also where it overflows a float (``exp(1e+06)``)."""
+    return "%g" % math.exp(log_value) if log_value < 700 else "exp(%g)" % log_value
 
 
 def _as_lobe_array(values, width, what) -> np.ndarray:
