@@ -16,13 +16,17 @@ def relative_l1(a, b, used):
 
 
 @pytest.mark.slow
-def test_mitsuba_renders_the_saved_scene_as_inference_fitted_it(tmp_path):
+@pytest.mark.parametrize("turn", [0, 90])
+def test_mitsuba_renders_the_saved_scene_as_inference_fitted_it(turn, tmp_path):
+    """``turn``: the scene's envmap rotated about the vertical axis (degrees); the map
+    is fitted in the envmap's frame, and scene.xml keeps the rotation."""
     scene = {"type": "scene", "integrator": {"type": "direct"}, "sensor": camera(RES, 32),
              "object": {"type": "sphere", "bsdf": {"type": "dsbrdf", "material": "gold-metallic-paint"}},
              "sky": sunsky(SUN)}
     photo = np.array(mi.render(mi.load_dict(scene), spp=256, seed=0), dtype=np.float64)
     fit = dict(scene, object={"type": "sphere", "bsdf": {"type": "dsbrdf"}},
-               sky={"type": "envmap", "bitmap": mi.Bitmap(np.ones((8, 16, 3), np.float32))})
+               sky={"type": "envmap", "bitmap": mi.Bitmap(np.ones((8, 16, 3), np.float32)),
+                    "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], turn)})
     result = mi_dsbrdf.recover(fit, photo, config="fast")
     result.save(tmp_path / "result")
     saved = np.array(mi.render(mi.load_file(str(tmp_path / "result" / "scene.xml")), spp=1024, seed=1),

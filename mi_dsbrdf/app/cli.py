@@ -18,7 +18,8 @@ from mi_dsbrdf.app.recover import recover_files
 from mi_dsbrdf.app.render import relight, render_to_files
 from mi_dsbrdf.app.scenes import scene_path
 from mi_dsbrdf.config import PRESETS, Config, field_docs
-from mi_dsbrdf.errors import ConfigError, InputError, MiDsbrdfError
+from mi_dsbrdf.backend import SUPPORTED_VARIANTS, check_llvm
+from mi_dsbrdf.errors import ConfigError, InputError, MiDsbrdfError, VariantError
 from mi_dsbrdf.model.build import GMM, build_model
 from mi_dsbrdf.model.model_file import SHIPPED
 
@@ -32,7 +33,15 @@ def _setup(variant):
     """Switch to ``variant`` (the package's import selected llvm_ad_rgb and
     registered the plugins; they re-register on a switch)."""
     if variant:
+        if variant not in SUPPORTED_VARIANTS:
+            raise VariantError("--variant %s: give one of %s (the JIT, RGB, differentiable variants this "
+                               "Mitsuba build has)" % (variant, ", ".join(v for v in SUPPORTED_VARIANTS
+                                                                         if v in mi.variants())))
+        if variant not in mi.variants():
+            raise VariantError("--variant %s: this Mitsuba build has no such variant" % variant)
         mi.set_variant(variant)
+        if variant.startswith("llvm"):
+            check_llvm()
 
 
 def _config(args):

@@ -102,7 +102,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     needs = decide(scene, work, None if user_mask is None else grid.all(user_mask), model.basis.n_lobes,
                    model.basis.n_bases)
     ts = TexelSum(working_scene(scene, grid), obj, cfg.map_size if needs.envmap_block else (1, 1),
-                  visibility=needs.visibility,
+                  visibility=needs.visibility, to_world=envmap_rotation(scene) if needs.envmap_block else None,
                   samples=cfg.texel_samples if needs.envmap_block else 1)     # the re-render as inference saw it
     keep = usable_blocks(grid, ts.mask, on_object, obs, below_white(obs, levels, user_mask))
     if keep.sum() < MIN_PIXELS:
@@ -263,6 +263,13 @@ def _progress(progress, cfg, needs, model):
         state["bar"].update()
         state["since"] = time.time()        # tqdm's clock
     return report, close
+
+
+def envmap_rotation(scene):
+    """(4, 4) to_world of the scene's environment map, or None for the identity: the
+    map is fitted in the envmap's own frame, which the saved scene.xml keeps."""
+    m = np.array(scene.emitters()[0].world_transform().matrix, dtype=np.float64).reshape(4, 4)
+    return None if np.allclose(m, np.eye(4)) else m
 
 
 def centre(shape) -> np.ndarray:

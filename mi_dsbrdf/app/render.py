@@ -108,7 +108,8 @@ def relight(material, out_file, envmap=None, shape="sphere", scene=None, shape_i
     t0 = time.perf_counter()
     img = np.array(mi.render(mi_scene, spp=spp), dtype=np.float32)
     if not np.all(np.isfinite(img)):
-        raise FloatingPointError("relighting produced non-finite pixels")
+        raise InputError("relighting produced non-finite pixels: the material or the map holds values "
+                         "too large to render")
     seconds = time.perf_counter() - t0
     png = write_files(img, out_file, force)
     return {"exr": os.fspath(out_file), "png": png, "seconds": seconds}

@@ -34,10 +34,9 @@ from mi_dsbrdf.brdf.dsbrdf import Material
 
 #: every file a result directory can hold (``--force`` replaces only such a folder)
 #: illumination.exr repeats each fitted texel as a TEXEL_BLOCK x TEXEL_BLOCK block:
-#: Mitsuba's envmap interpolates bilinearly between texel centres, inference treats
-#: each texel as constant, and the blocks confine the blend to their edges (the demo's
-#: Mitsuba render of scene.xml against the tool's re-render: 6.7 % relative L1 with
-#: the texels as they are, 2.6 % at 4, 2.2 % at 8, 2.1 % at 16)
+#: inference treats a texel as constant, Mitsuba's envmap interpolates bilinearly
+#: between texel centres, and the blocks confine that blend to their edges
+#: (docs/design.md)
 TEXEL_BLOCK = 8
 
 

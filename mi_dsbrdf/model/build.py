@@ -229,6 +229,10 @@ def build_model(source, out, k=DEFAULT_K, exclude=(), workers=2, progress=True, 
     GMM's structure (:func:`gmm_structure`); ``objective``: what the full fits
     minimise (recorded; with ``fits_from`` the stored fits' own). Returns the arrays."""
     gmm_structure(gmm)                                        # a bad structure fails before the fits
+    if not isinstance(k, int) or isinstance(k, bool) or k < 1:
+        raise ModelError("--k must be an integer >= 1 (basis functions), got %r" % (k,))
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise ModelError("--workers must be an integer >= 1, got %r" % (workers,))
     t0 = time.perf_counter()
     if fits_from is not None:
         if objective != OBJECTIVE:
