@@ -10,9 +10,10 @@ import pytest
 
 import mi_dsbrdf
 from mi_dsbrdf.app.cli import main
-from mi_dsbrdf.app.io import read_image, srgb_to_linear, write_exr
+from mi_dsbrdf.app.io import write_exr
 from mi_dsbrdf.app.photo import fit_circle, sphere_scene
 from mi_dsbrdf.app.scenes import SCENE_DIR, scene_path
+from mi_dsbrdf.inference.images import read_image, srgb_to_linear
 
 RES = 32
 T = mi.ScalarTransform4f

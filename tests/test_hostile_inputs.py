@@ -17,7 +17,7 @@ import mi_dsbrdf
 import mi_dsbrdf.app.recover as recover_module
 from mi_dsbrdf import InputError, MaterialError, SceneError
 from mi_dsbrdf.app.cli import main
-from mi_dsbrdf.app.io import check_out, staged_output, write_exr
+from mi_dsbrdf.app.io import check_out, staged_file, staged_output, write_exr
 from mi_dsbrdf.app.photo import sphere_scene
 from mi_dsbrdf.app.render import check_envmap
 from mi_dsbrdf.app.result import RESULT_FILES, Result
@@ -295,6 +295,22 @@ def test_leftover_staging_folders_are_cleaned_or_named(case, tmp_path, capsys, q
     assert main(recover_args(case, out)) == 1
     one_line(capsys, str(stopped / "result"), "move it back")
     assert (stopped / "result" / "material.json").exists() and not out.exists()
+
+
+def test_leftover_staging_files_are_cleaned_or_named(tmp_path):
+    """A file's staging name carries the writer's pid, as a folder's does: a dead
+    writer's file goes, a live one's is named."""
+    out = tmp_path / "relit.exr"
+    dead = tmp_path / (".relit.exr.partial-%d-file.exr" % DEAD_PID)
+    dead.write_text("half")
+    tmp = staged_file(out)
+    assert os.path.basename(tmp) == ".relit.exr.partial-%d-file.exr" % os.getpid()
+    assert listing(tmp_path) == []
+    live = tmp_path / (".relit.exr.partial-%d-file.exr" % os.getppid())
+    live.write_text("half")
+    with pytest.raises(InputError, match="pid %d.*remove that file" % os.getppid()):
+        staged_file(out)
+    assert listing(tmp_path) == [live.name]
 
 
 def test_a_mount_point_is_refused_before_the_work(case, tmp_path, capsys, monkeypatch):

@@ -7,7 +7,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mi_dsbrdf.app.outline import boundary_points, fit_circle, fit_outline, object_region
+from mi_dsbrdf.app.outline import boundary_points, bright_region, fit_circle, fit_outline
 from mi_dsbrdf.app.photo import photo_scene, sphere_scene
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.latlong import latlong_directions
@@ -76,7 +76,7 @@ def test_boundary_points_sit_on_an_edge_where_the_coverage_puts_them():
     img = np.zeros((16, 24, 3))
     img[:, :10] = 1.0
     img[:, 10] = 0.3
-    region, above = object_region(img)
+    region, above = bright_region(img)
     pts = boundary_points(region, above)
     assert len(pts) == 16
     np.testing.assert_allclose(pts[:, 0], 10.3)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mi_dsbrdf.errors import InputError
-from mi_dsbrdf.inference.pixels import below_white, interior, saturated, usable_pixels, white_levels
+from mi_dsbrdf.inference.pixels import interior, saturated, usable_pixels, white_levels
 
 
 def disc(n=21, r=7.5):
@@ -86,12 +86,14 @@ def test_white_level_clips_each_channel_and_is_checked():
     sat = saturated(img, white_levels([0.9, 1.0, 0.7]))
     assert sat[8, 8] and sat[9, 9] and sat.sum() == 2
     assert saturated(img, white_levels(1.0)).sum() == 0
-    keep = below_white(img, white_levels([0.9, 1.0, 0.7]))
+    keep = usable_pixels(np.ones(m.shape, bool), img, white_level=white_levels([0.9, 1.0, 0.7]))
     assert not keep[8, 8] and not keep[9, 9] and keep.sum() == keep.size - 2
     user = np.zeros(m.shape, bool)
     user[:, :9] = True
-    assert np.array_equal(below_white(img, white_levels([0.9, 1.0, 0.7]), user), keep & user)
-    assert below_white(img, None, user) is user and below_white(img, None) is None
+    assert np.array_equal(usable_pixels(m, img, user, white_levels([0.9, 1.0, 0.7])),
+                          usable_pixels(m, img) & keep & user)
+    assert np.array_equal(usable_pixels(m, img, user, None), usable_pixels(m, img) & user)
+    assert np.array_equal(usable_pixels(m, img), interior(m))
     for bad, words in ((float("nan"), "finite and > 0"), (0, "finite and > 0"), (-1.0, "finite and > 0"),
                        ([1.0, float("inf"), 1.0], "finite and > 0"), ([1.0, 2.0], "one value or 3"),
                        ("high", "one number or 3")):

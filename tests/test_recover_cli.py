@@ -63,6 +63,7 @@ def test_recover_writes_the_result_directory(case, tmp_path, capsys):
         == mi_dsbrdf.Config(max_rounds=2, block_iters=20)
     assert set(log["config"]) == {f.name for f in dataclasses.fields(mi_dsbrdf.Config)}
     assert log["image_size"] == [RES, RES] and log["map_size"] is None        # a directional light: no map
+    assert log["image_size"] == log["working_grid"]["image"]                    # [H, W] both
     assert list(log["stages"]) == ["checks", "inference", "re-render", "save"]
     for stage in log["stages"].values():
         assert stage["seconds"] >= 0 and 50 < stage["peak_memory_mb"] < 1e5

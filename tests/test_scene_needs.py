@@ -3,6 +3,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from mi_dsbrdf.app.memory import memory_needs
 from mi_dsbrdf.errors import SceneError
 from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object, other_shapes
 from mi_dsbrdf.app.scenes import scene_path
@@ -99,6 +100,19 @@ def test_other_shapes_need_visibility_rays_and_are_named():
     xml = mi.load_string('<scene version="3.0.0"><shape type="sphere"><bsdf type="dsbrdf"/></shape>'
                          '<shape type="rectangle"/><emitter type="constant"/></scene>')
     assert other_shapes(xml, dsbrdf_object(xml)) == ["rectangle"]
+
+
+def test_the_memory_estimate_and_decide_share_one_visibility_rule():
+    """memory_needs (before the image is read) decides the light and the shadow rays
+    as decide does, and decide takes its answer instead of testing convexity again."""
+    for scene in (mi.load_file(scene_path("sphere_envmap"), res="16", spp="1"),
+                  mi.load_file(scene_path("torus_envmap"), res="16", spp="1"),
+                  mi.load_dict(blocked_scene("point", blocker=False)), mi.load_dict(blocked_scene("directional"))):
+        envmap, visibility = memory_needs(scene)
+        needs = decide(scene, colour_image())
+        assert (envmap, visibility[0]) == (needs.envmap_block, needs.visibility)
+        assert needs.reasons[2].endswith("(%s)" % visibility[1])
+        assert decide(scene, colour_image(), visibility=visibility) == needs
 
 @pytest.mark.parametrize("light", ["point", pytest.param("directional", marks=pytest.mark.slow)])
 def test_a_card_shadowing_a_quarter_of_the_sphere_leaves_the_light_within_2_degrees(light):

@@ -16,30 +16,11 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.errors import InputError
-from mi_dsbrdf.inference import images
-from mi_dsbrdf.inference.images import as_rgb, open_bitmap, srgb_to_linear  # noqa: F401 (re-exported)
+from mi_dsbrdf.inference.images import as_rgb, open_bitmap
 
 #: a staging folder beside a destination older than this (seconds) is a leftover,
 #: whatever became of the process that made it
 STALE_SECONDS = 24 * 3600
-
-
-def as_radiance(pixels, srgb=False, what="image") -> np.ndarray:
-    """:func:`mi_dsbrdf.inference.images.as_radiance`, with ``srgb`` refused for
-    pixels that are not 8- or 16-bit display values (float radiance is linear
-    already: the curve would silently not apply)."""
-    a = np.asarray(pixels)
-    if srgb and a.dtype not in (np.uint8, np.uint16):
-        raise InputError("%s holds %s values, which are linear radiance already: --srgb (srgb=True) linearises "
-                         "8- or 16-bit display values (PNG/JPEG); leave it out" % (what, a.dtype))
-    return images.as_radiance(a, srgb, what)
-
-
-def read_image(path, srgb=False, what="image") -> np.ndarray:
-    """(H, W, 3) float64 linear radiance from an image file (:func:`as_radiance`:
-    an 8- or 16-bit file only with ``srgb``, and ``srgb`` only for one);
-    InputError if missing or unreadable."""
-    return as_radiance(np.array(open_bitmap(path, what)), srgb, "%s %s" % (what, os.fspath(path)))
 
 
 def read_mask(path, shape) -> np.ndarray:
@@ -155,9 +136,10 @@ def _probe(folder) -> None:
 
 
 def _staging_prefix(out, kind) -> str:
-    """The name prefix of ``out``'s staging folders of ``kind`` ("partial": the
-    result being written; "old": an earlier result being replaced), with this
-    process's id, which tells a later run whether their writer is alive."""
+    """The name prefix of ``out``'s staging folders (and files, :func:`staged_file`)
+    of ``kind`` ("partial": the result being written; "old": an earlier result being
+    replaced), with this process's id, which tells a later run whether their writer
+    is alive."""
     return ".%s.%s-%d-" % (os.path.basename(out), kind, os.getpid())
 
 
@@ -172,11 +154,11 @@ def _alive(pid) -> bool:
 
 
 def clear_leftovers(out) -> None:
-    """Remove the staging folders (``.NAME.partial-*``, ``.NAME.old-*``) beside
-    ``out`` that earlier runs left (killed while writing): those of a process
+    """Remove the staging folders and files (``.NAME.partial-*``, ``.NAME.old-*``)
+    beside ``out`` that earlier runs left (killed while writing): those of a process
     that has ended, or older than a day (:data:`STALE_SECONDS`). InputError
-    naming the folder for one that may still be written (its process alive, or
-    unknown, and younger than a day), and for an ``.old-*`` folder that holds
+    naming the folder or file for one that may still be written (its process alive,
+    or unknown, and younger than a day), and for an ``.old-*`` folder that holds
     an earlier result while ``out`` does not exist (a run stopped while
     replacing it): it is the user's to move back."""
     out = os.path.abspath(os.fspath(out))
@@ -189,7 +171,7 @@ def clear_leftovers(out) -> None:
     for entry in sorted(entries):
         m = pattern.match(entry)
         path = os.path.join(parent, entry)
-        if m is None or not os.path.isdir(path) or os.path.islink(path):
+        if m is None or os.path.islink(path) or not (os.path.isdir(path) or os.path.isfile(path)):
             continue
         kind, pid = m.group(1), None if m.group(2) is None else int(m.group(2))
         try:
@@ -198,13 +180,17 @@ def clear_leftovers(out) -> None:
             continue
         if age < STALE_SECONDS and (pid is None or _alive(pid)):
             raise InputError("%s beside the output is being written by %s: wait for it to finish, or remove "
-                             "that folder if no run is writing %s" % (
+                             "that %s if no run is writing %s" % (
                                  path, "another process (pid %d)" % pid if pid is not None else "an earlier run",
-                                 out))
+                                 "folder" if os.path.isdir(path) else "file", out))
         if kind == "old" and not os.path.exists(out) and os.path.exists(os.path.join(path, "result")):
             raise InputError("a run was stopped while replacing %s: the earlier result is in %s; move it back to %s "
                              "or remove it" % (out, os.path.join(path, "result"), out))
-        shutil.rmtree(path, ignore_errors=True)
+        if os.path.isdir(path):
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                os.remove(path)
 
 
 def umask() -> int:
@@ -280,13 +266,16 @@ def _remove_empty(folder, top) -> None:
 
 def staged_file(out_file, force=False):
     """A temporary name beside ``out_file`` to write to, then ``os.replace`` it into
-    place (InputError if ``out_file`` has no extension (the writer's format), exists
-    without ``force``, is a folder, or its folder does not exist or is not
-    writable)."""
+    place: ``.NAME.partial-PID-file.EXT`` (:func:`_staging_prefix`), e.g.
+    ``.relit.exr.partial-1234-file.exr`` for ``relit.exr`` (the extension tells the
+    writer its format). Staging files earlier runs left beside it are
+    removed (:func:`clear_leftovers`). InputError if ``out_file`` has no extension,
+    exists without ``force``, is a folder, or its folder does not exist or is not
+    writable."""
     out_file = os.path.abspath(os.fspath(out_file))
     if os.path.isdir(out_file):
         raise InputError("output %s is a folder: give a file name" % out_file)
-    stem, ext = os.path.splitext(os.path.basename(out_file))
+    ext = os.path.splitext(os.path.basename(out_file))[1]
     if not ext:
         raise InputError("output %s has no extension: give a file name ending in its format (.exr, .png)" % out_file)
     if os.path.exists(out_file) and not force:
@@ -295,7 +284,8 @@ def staged_file(out_file, force=False):
     if not os.path.isdir(folder):
         raise InputError("folder %s of the output does not exist" % folder)
     _probe(folder)
-    return os.path.join(folder, ".%s.partial%s" % (stem, ext))
+    clear_leftovers(out_file)
+    return os.path.join(folder, _staging_prefix(out_file, "partial") + "file" + ext)
 
 
 def write_exr(path, image) -> None:

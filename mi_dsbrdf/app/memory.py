@@ -11,26 +11,25 @@ import numpy as np
 
 from mi_dsbrdf.app.working_grid import WorkingGrid
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.errors import ConfigError, SceneError
+from mi_dsbrdf.errors import ConfigError
 from mi_dsbrdf.inference.envmap import map_sizes
 from mi_dsbrdf.inference.objective import MAX_REFLECTANCE_PIXELS, MIN_REFLECTANCE_PIXELS
-from mi_dsbrdf.inference.scene_needs import dsbrdf_object, is_convex
+from mi_dsbrdf.inference.scene_needs import dsbrdf_object, light_kind, needs_visibility
 
 GB = float(1 << 30)
 
 
 def memory_needs(scene) -> tuple:
-    """(under an illumination map?, shadow rays?) of ``scene`` for
-    :func:`memory_estimate`, before the image is read (SceneError without a camera or
-    without exactly one ``dsbrdf`` object; a scene with other lights than one is
-    refused later)."""
-    if not scene.sensors():
-        raise SceneError("the scene has no camera: add a <sensor> (e.g. perspective) with a film of the image's size")
+    """(under an illumination map?, :func:`~mi_dsbrdf.inference.scene_needs.needs_visibility`
+    of the object: (shadow rays?, reason)) of ``scene`` for :func:`memory_estimate`,
+    before the image is read; the pair goes on to
+    :func:`~mi_dsbrdf.inference.scene_needs.decide`. SceneError without exactly one
+    ``dsbrdf`` object or with a light inference does not take; a scene with other
+    lights than one is refused later."""
     shape = dsbrdf_object(scene)
     emitters = scene.emitters()
-    envmap = len(emitters) == 1 and emitters[0].is_environment()
-    return envmap, len(scene.shapes()) > 1 or not is_convex(shape)[0]
-
+    light = light_kind(emitters[0]) if len(emitters) == 1 else None
+    return light == "envmap", needs_visibility(scene, shape, light)
 
 
 # The model below was fitted to the peak resident memory (ru_maxrss, one process

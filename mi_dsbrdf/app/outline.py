@@ -167,7 +167,7 @@ def background(lum) -> tuple:
     return level, 1.4826 * float(np.median(np.abs(ring - level)))
 
 
-def object_region(image) -> tuple:
+def bright_region(image) -> tuple:
     """((H, W) bool region, (H, W) float64 brightness above the background) of the
     object in ``image`` (H, W, C): the pixels brighter than the background by more
     than its noise (NOISE_SIGMAS, TINY), their largest 8-connected part with its
@@ -305,7 +305,7 @@ def fit_outline(image) -> tuple:
     """(cx, cy, r) in pixels of the sphere in ``image`` (H, W, C) on a black
     background, without a mask (module doc); InputError, asking for a mask, when
     the background is not black or the answer cannot be trusted."""
-    region, above = object_region(image)
+    region, above = bright_region(image)
     h, w = region.shape
     if region.sum() < MIN_OUTLINE:
         raise InputError("the object covers %d pixels: too few to fit its outline; %s" % (region.sum(), ASK))

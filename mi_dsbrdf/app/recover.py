@@ -14,7 +14,7 @@ import mitsuba as mi
 import numpy as np
 from tqdm import tqdm
 
-from mi_dsbrdf.app.io import as_mask, as_radiance, check_image, check_out, read_image, read_mask
+from mi_dsbrdf.app.io import as_mask, check_image, check_out, read_mask
 from mi_dsbrdf.app.result import RESULT_FILES, Result, stage_row
 from mi_dsbrdf.app.memory import check_memory, memory_needs
 from mi_dsbrdf.app.working_grid import (WorkingGrid, rerender as grid_rerender, usable_blocks, working_grid,
@@ -23,8 +23,9 @@ from mi_dsbrdf.config import PRESETS, Config, preset
 from mi_dsbrdf.errors import InputError, SceneError
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
-from mi_dsbrdf.inference.light import SEARCH_KEEP, recover_light
-from mi_dsbrdf.inference.pixels import below_white, white_levels
+from mi_dsbrdf.inference.images import as_radiance, read_image
+from mi_dsbrdf.inference.light import SEARCH_CANDIDATES, recover_light
+from mi_dsbrdf.inference.pixels import white_levels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
 from mi_dsbrdf.model.model_file import shipped_model
@@ -86,10 +87,10 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     levels = white_levels(white_level)
     scene, source = _scene(scene)
     # the memory the settings need, priced before the image is read (ConfigError if over)
-    envmap, shadows = memory_needs(scene)
-    check_memory(cfg, WorkingGrid.of(scene.sensors()[0].film().crop_size(), cfg.working_pixels), envmap, shadows)
-    obs, user_mask = load_inputs(image, mask, srgb)
     film = scene.sensors()[0].film().crop_size()
+    envmap, visibility = memory_needs(scene)
+    check_memory(cfg, WorkingGrid.of(film, cfg.working_pixels), envmap, visibility[0])
+    obs, user_mask = load_inputs(image, mask, srgb)
     h, w = obs.shape[:2]
     if (w, h) != (int(film[0]), int(film[1])):
         raise InputError("%s is %dx%d but the scene's film is %dx%d" % (_name(image), w, h, film[0], film[1]))
@@ -100,11 +101,11 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     grid, on_object = working_grid(scene, obj, user_mask, cfg.working_pixels)
     work = grid.mean(obs)
     needs = decide(scene, work, None if user_mask is None else grid.all(user_mask), model.basis.n_lobes,
-                   model.basis.n_bases)
+                   model.basis.n_bases, visibility)
     ts = TexelSum(working_scene(scene, grid), obj, cfg.map_size if needs.envmap_block else (1, 1),
                   visibility=needs.visibility, to_world=envmap_rotation(scene) if needs.envmap_block else None,
                   samples=cfg.texel_samples if needs.envmap_block else 1)     # the re-render as inference saw it
-    keep = usable_blocks(grid, ts.mask, on_object, obs, below_white(obs, levels, user_mask))
+    keep = usable_blocks(grid, ts.mask, on_object, obs, user_mask, levels)
     if keep.sum() < MIN_PIXELS:
         raise InputError("only %d usable pixels (on the object, inside the mask, unsaturated, off the silhouette); "
                          "inference needs at least %d: use a larger image or mask" % (int(keep.sum()), MIN_PIXELS))
@@ -130,7 +131,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
         close()
     stages["inference"] = stage_row(t0)
     t1 = time.perf_counter()
-    if progress is True:
+    if _printing(progress):
         print("  re-rendering %d pixels under the recovered material and light" % (
             len(lit.pixels) if on_object is None else int(on_object.sum())), flush=True)
     rerender = grid_rerender(grid, lit, rec.material, L, cfg.map_pairs, on_object)
@@ -140,10 +141,10 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     log = {"version": __version__, "config": dataclasses.asdict(cfg),
            "scene": source if isinstance(source, str) else None,
            "image": os.fspath(image) if isinstance(image, (str, os.PathLike)) else None,
-           "image_size": [w, h], "map_size": list(cfg.map_size) if needs.envmap_block else None,
+           "image_size": [h, w], "map_size": list(cfg.map_size) if needs.envmap_block else None,
            "stages": stages, "needs": list(needs.reasons), "rounds": rows, "used_pixels": int(keep.sum()),
            "working_grid": grid.log(),
-           "seconds": rec.seconds if rows else time.perf_counter() - t0,
+           "seconds": rec.seconds,
            "unseen_texels": rows[-1].get("unseen_texels") if rows else None}
     return Result(material=rec.material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
                   image=obs, used=grid.repeat(keep), rerender=rerender, scene_source=source)
@@ -217,6 +218,12 @@ def _image(image, srgb) -> np.ndarray:
     return as_radiance(image, srgb, "image (a %s array)" % np.asarray(image).dtype)
 
 
+def _printing(progress) -> bool:
+    """Whether ``progress`` asks for printed progress (True, or another true value
+    that is not a callable) rather than quiet (None, False) or a callable's rows."""
+    return bool(progress) and not callable(progress)
+
+
 #: the progress bar of each logged pass: {pass: (description, unit)}
 PASSES = {"start": ("starts", "start"), "grey": ("grey pass", "round"), "colour": ("colour pass", "round"),
           "light search": ("light search", "direction"), "light": ("light pass", "round")}
@@ -225,17 +232,18 @@ PASSES = {"start": ("starts", "start"), "grey": ("grey pass", "round"), "colour"
 def _progress(progress, cfg, needs, model):
     """(report, close): ``report`` is called with each logged row, ``close`` when
     inference ends. ``progress`` None/False: quiet; a callable: it is ``report``;
-    True: the scene's needs printed first, then one tqdm bar per pass with its
-    total (the starts, ``cfg.max_rounds`` rounds, the light search's directions)
-    and an ETA. A pass that converges early ends its bar below the total."""
-    if progress is None or progress is False:
+    True (or any other true value, :func:`_printing`): the scene's needs printed
+    first, then one tqdm bar per pass with its total (the starts,
+    ``cfg.max_rounds`` rounds, the light search's candidates) and an ETA. A pass
+    that converges early ends its bar below the total."""
+    if not progress:
         return None, lambda: None
-    if callable(progress):
+    if not _printing(progress):
         return progress, lambda: None
     for line in needs.reasons:
         print("  " + line, flush=True)
     totals = {"start": len(reflectance_starts(model)), "grey": cfg.max_rounds, "colour": cfg.max_rounds,
-              "light search": SEARCH_KEEP + 2, "light": cfg.max_rounds}
+              "light search": SEARCH_CANDIDATES, "light": cfg.max_rounds}
     state = {"bar": None, "pass": None, "since": time.time()}
 
     def close():

@@ -7,10 +7,11 @@ import time
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.io import check_radiance, read_image, save_preview, staged_file, write_exr
+from mi_dsbrdf.app.io import check_radiance, save_preview, staged_file, write_exr
 from mi_dsbrdf.app.scenes import camera, shape_dict
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.errors import InputError
+from mi_dsbrdf.inference.images import read_image
 from mi_dsbrdf.model.library import library_names
 
 

@@ -74,7 +74,7 @@ class Result:
         convention; texels no pixel sees are 0), or None for a point or
         directional light
     seen : (H, W) bool texels some observed pixel sees, or None
-    log : {"version", "config" (the Config's fields), "image_size" [W, H],
+    log : {"version", "config" (the Config's fields), "image_size" [H, W],
         "map_size" [H, W] (None without a map), "stages" {"checks", "inference",
         "re-render": {"seconds", "peak_memory_mb"}} ("save" is added in log.json),
         "needs": one line per decision about the scene, "rounds": one dict per

@@ -197,15 +197,15 @@ def working_grid(scene, shape, user_mask, working_pixels) -> tuple:
     return WorkingGrid.of((W, H), working_pixels, object_region(on if user_mask is None else on & user_mask)), on
 
 
-def usable_blocks(grid: WorkingGrid, working_mask, on_object, image, user_mask) -> np.ndarray:
+def usable_blocks(grid: WorkingGrid, working_mask, on_object, image, user_mask, white_level=None) -> np.ndarray:
     """(h, w) bool: the working pixels inference uses: on the grid's view of the object
     (``working_mask``, ``TexelSum.mask``) with every pixel of the block usable at full
     size (:func:`~mi_dsbrdf.inference.pixels.usable_pixels` of the film's object mask
-    ``on_object``, the ``image`` (H, W, 3) and ``user_mask``). On the film itself,
-    :func:`usable_pixels` of ``working_mask``."""
+    ``on_object``, the ``image`` (H, W, 3), ``user_mask`` and ``white_level`` (3,) or
+    None). On the film itself, :func:`usable_pixels` of ``working_mask``."""
     if grid.whole:
-        return usable_pixels(working_mask, image, user_mask)
-    return grid.all(usable_pixels(on_object, image, user_mask)) & working_mask
+        return usable_pixels(working_mask, image, user_mask, white_level)
+    return grid.all(usable_pixels(on_object, image, user_mask, white_level)) & working_mask
 
 
 def object_mask(scene, shape, rows=None) -> np.ndarray:

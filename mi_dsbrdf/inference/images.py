@@ -51,9 +51,14 @@ def as_radiance(pixels, srgb=False, what="image") -> np.ndarray:
     8- or 16-bit integer pixels (a PNG or JPEG, or a uint8/uint16 array) hold
     display values: with ``srgb`` they are linearised by the sRGB curve to [0, 1],
     without it an InputError names the fix (a raw 8-bit value taken as radiance
-    is wrong by the curve and a factor of 255).
+    is wrong by the curve and a factor of 255). ``srgb`` with any other pixels is
+    an InputError too (float radiance is linear already: the curve would silently
+    not apply).
     """
     a = np.asarray(pixels)
+    if srgb and a.dtype not in (np.uint8, np.uint16):
+        raise InputError("%s holds %s values, which are linear radiance already: --srgb (srgb=True) linearises "
+                         "8- or 16-bit display values (PNG/JPEG); leave it out" % (what, a.dtype))
     if a.dtype in (np.uint8, np.uint16):
         if not srgb:
             raise InputError("%s holds %d-bit display values, not radiance: give a linear HDR image (EXR/HDR), "
@@ -65,6 +70,7 @@ def as_radiance(pixels, srgb=False, what="image") -> np.ndarray:
 
 
 def read_image(path, srgb=False, what="image") -> np.ndarray:
-    """(H, W, 3) float64 linear radiance from an EXR/HDR file (:func:`as_radiance`:
-    an 8- or 16-bit file only with ``srgb``); InputError if missing or unreadable."""
+    """(H, W, 3) float64 linear radiance from an image file (:func:`as_radiance`:
+    an 8- or 16-bit file only with ``srgb``, and ``srgb`` only for one);
+    InputError if missing or unreadable."""
     return as_radiance(np.array(open_bitmap(path, what)), srgb, "%s %s" % (what, os.fspath(path)))

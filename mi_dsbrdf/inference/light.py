@@ -30,6 +30,11 @@ from mi_dsbrdf.inference.result import Recovery
 
 #: directions of the global search (Fibonacci lattice) and how many of them go on
 SEARCH_DIRECTIONS, SEARCH_KEEP = 64, 6
+#: directions the brightest observed pixel suggests (:func:`highlight_lights`)
+HIGHLIGHT_DIRECTIONS = 2
+#: candidates the light search refines at most (one logged row each): the
+#: SEARCH_KEEP best of the lattice and the HIGHLIGHT_DIRECTIONS
+SEARCH_CANDIDATES = SEARCH_KEEP + HIGHLIGHT_DIRECTIONS
 #: the search's reflectance fits run this fraction of a block's iterations (at least 5)
 SEARCH_FRACTION = 0.25
 #: function evaluations of the search's coarse Powell refinement, and of a light block
@@ -89,7 +94,7 @@ def matched_log_intensity(post, material, theta, phi):
 def highlight_lights(post) -> list:
     """Directions the brightest observed pixel suggests: its normal (the light of a
     matte object) and the mirror of the view direction about it (the light of a
-    glossy one), as [(theta, phi), ...]."""
+    glossy one), as [(theta, phi), ...] (:data:`HIGHLIGHT_DIRECTIONS` of them)."""
     lum = np.where(post.keep, post.observed.mean(axis=1), -np.inf)
     i = int(np.argmax(lum))
     si = post.view.texels.si

@@ -84,17 +84,6 @@ def white_levels(value, channels=3):
     return np.broadcast_to(levels, (channels,)).copy()
 
 
-def below_white(image, white_level, user_mask=None):
-    """``user_mask`` (H, W) bool less the pixels of ``image`` (H, W, C) with a
-    channel at or above ``white_level`` (C,) (every pixel for a None mask); the
-    mask unchanged (None stays None) without a white level."""
-    if white_level is None:
-        return user_mask
-    image = np.asarray(image)
-    keep = ~np.any(image >= np.asarray(white_level) * (1 - CLIP_TOLERANCE), axis=2)
-    return keep if user_mask is None else keep & np.asarray(user_mask, bool)
-
-
 def usable_pixels(object_mask, image, user_mask=None, white_level=None) -> np.ndarray:
     """(H, W) bool: the pixels inference uses (module doc). ``object_mask`` (H, W):
     pixels whose centre sees the object (``TexelSum.mask``); ``image`` (H, W, C);

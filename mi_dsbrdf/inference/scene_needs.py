@@ -90,6 +90,22 @@ def other_shapes(scene, obj) -> list:
     return names
 
 
+def needs_visibility(scene, obj, light=None) -> tuple:
+    """(shadow rays?, reason) for the object ``obj`` of ``scene``: yes when it is not
+    convex (:func:`is_convex`: it can shadow itself) or when other shapes share the
+    scene (:func:`other_shapes`: they can shadow it). ``light``: the light's kind
+    (:func:`light_kind`) or None; it only words the reason."""
+    convex, why = is_convex(obj)
+    others = other_shapes(scene, obj)
+    if others:
+        shown = others[:MAX_NAMED] + (["%d more" % (len(others) - MAX_NAMED)] if len(others) > MAX_NAMED else [])
+        why += "; %s in the scene can shadow it, traced through the whole scene: %s" % (
+            "another shape" if len(others) == 1 else "%d other shapes" % len(others), ", ".join(shown))
+    elif light not in (None, "envmap") and convex:
+        why += "; no other shape, so a %s light casts no other shadow on it" % light
+    return not convex or bool(others), why
+
+
 def is_grey(image, mask=None, tol=GREY_TOLERANCE) -> bool:
     """True when every masked pixel has equal channels within ``tol`` (relative)."""
     img = np.asarray(image, dtype=np.float64)
@@ -109,8 +125,10 @@ def dsbrdf_object(scene):
     return objects[0]
 
 
-def decide(scene, image, mask=None, n_lobes=3, n_bases=10) -> SceneNeeds:
-    """The needs of ``scene`` (a loaded mi.Scene) observed as ``image`` (H, W, C)."""
+def decide(scene, image, mask=None, n_lobes=3, n_bases=10, visibility=None) -> SceneNeeds:
+    """The needs of ``scene`` (a loaded mi.Scene) observed as ``image`` (H, W, C).
+    ``visibility``: :func:`needs_visibility` of the scene's object and light, when the
+    caller has it already (a mesh's convexity is not tested twice)."""
     emitters = scene.emitters()
     if len(emitters) != 1:
         raise SceneError("inference needs exactly one light in the scene, found %d" % len(emitters))
@@ -121,15 +139,7 @@ def decide(scene, image, mask=None, n_lobes=3, n_bases=10) -> SceneNeeds:
                                        else "direction + intensity by Powell's method, no envmap block"))
     grey = is_grey(image, mask)
     reasons.append("colour pass: %s" % ("no (the image is grey)" if grey else "yes (the image has colour)"))
-    convex, why = is_convex(obj)
-    others = other_shapes(scene, obj)
-    if others:
-        shown = others[:MAX_NAMED] + (["%d more" % (len(others) - MAX_NAMED)] if len(others) > MAX_NAMED else [])
-        why += "; %s in the scene can shadow it, traced through the whole scene: %s" % (
-            "another shape" if len(others) == 1 else "%d other shapes" % len(others), ", ".join(shown))
-    elif light != "envmap" and convex:
-        why += "; no other shape, so a %s light casts no other shadow on it" % light
-    trace = not convex or bool(others)
+    trace, why = needs_visibility(scene, obj, light) if visibility is None else visibility
     reasons.append("visibility rays: %s (%s)" % ("yes" if trace else "no", why))
     reasons.append("reflectance: %d lobes, %d bases" % (n_lobes, n_bases))
     return SceneNeeds(light, not grey, trace, n_lobes, n_bases, tuple(reasons))
