@@ -305,6 +305,7 @@ def test_all_unmeasured_merl_file_is_a_clear_error(tmp_path, capsys):
         MeasuredBRDF.from_binary(tmp_path / "empty.binary")
 
 
+@pytest.mark.slow
 def test_grey_image_with_clipped_highlights_comes_back_grey(directional):
     """A grey image with its highlight clipped: the plateau is left out and the
     lobes start (and stay) grey, not green."""

@@ -1,10 +1,12 @@
 """Lambert + Cook-Torrance, the comparison model of the reports."""
 import numpy as np
+import pytest
 
 from mi_dsbrdf.model import samples
 from mi_dsbrdf.model.baselines import cook_torrance, fit_cook_torrance
 
 
+@pytest.mark.slow
 def test_cook_torrance_fit_recovers_a_known_one_lobe_model():
     truth = np.array([np.log(0.3), np.log(0.2), np.log(0.1),        # k_d
                       np.log(0.05), np.log(0.05), np.log(0.05),     # k_s

@@ -136,6 +136,7 @@ def test_scale_invariant_error_finds_the_scale_and_ignores_it():
     assert err <= log_rmse(noisy, truth, cos_i) + 1e-9 and err < log_rmse(noisy * 0.01, truth, cos_i)
 
 
+@pytest.mark.slow
 def test_fit_keeps_a_dark_floor_under_a_sharp_peak():
     """A metal-like BRDF: 1e-3/sr everywhere under a peak of ~1e3/sr. The fit must
     keep the floor (the paper's convention sees it; the cosine one hardly does)."""

@@ -97,6 +97,7 @@ def test_a_light_takes_the_gmm_volume_of_lights_not_the_maps(observed, monkeypat
     assert not np.allclose(psi[1], psi[2])
 
 
+@pytest.mark.slow
 def test_unknown_directional_light_within_a_degree(observed):
     s = sphere({"type": "dsbrdf"})
     ts = TexelSum(s, s.shapes()[0], (1, 1))
@@ -187,6 +188,7 @@ def test_coarse_to_fine_map_sizes_and_resampling():
     np.testing.assert_array_equal(resample(up, (2, 4))[1], x[1])
 
 
+@pytest.mark.slow
 def test_a_grey_object_comes_back_grey():
     """A grey image (grey material, white light) gives grey lobes: the
     chromaticity starts at the image's colour (a random start gives coloured

@@ -65,7 +65,8 @@ def test_recovery_beats_a_constant_map_and_the_mean_material(name, photons, tmp_
     assert brdf_errors(res.material, truth)["paper"] < brdf_errors(model.mean_material(), truth)["paper"]
 
 
-@pytest.mark.parametrize("photons", [None, pytest.param(PHOTONS, marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("photons", [None, PHOTONS])
 def test_a_near_lambertian_material_comes_back_without_a_highlight(photons, tmp_path):
     res, truth, _, model = recover("pink-felt", tmp_path, photons)
     s = samples_from_function(lambda th, td, pd: truth.eval(th, td))
