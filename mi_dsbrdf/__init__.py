@@ -23,8 +23,9 @@ from mi_dsbrdf.errors import (BackendError, ConfigError, InputError, MaterialErr
 from mi_dsbrdf.model.library import load_material  # noqa: E402
 from mi_dsbrdf.app.recover import recover  # noqa: E402
 from mi_dsbrdf.app.result import Result  # noqa: E402
+from mi_dsbrdf.app.batch import recover_many  # noqa: E402
 
 __version__ = "0.1.0"
-__all__ = ["recover", "Result", "Material", "load_material", "Config", "PRESETS",
+__all__ = ["recover", "recover_many", "Result", "Material", "load_material", "Config", "PRESETS",
            "MiDsbrdfError", "BackendError", "VariantError",
            "MaterialError", "MeasuredFileError", "ModelError", "ConfigError", "InputError", "SceneError"]

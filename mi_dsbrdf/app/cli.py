@@ -11,7 +11,9 @@ import signal
 import sys
 
 import mitsuba as mi
+from tqdm import tqdm
 
+from mi_dsbrdf.app.batch import FAILED, recover_many
 from mi_dsbrdf.app.demo import run
 from mi_dsbrdf.app.photo import LIGHTS, photo_scene
 from mi_dsbrdf.app.recover import recover_files
@@ -155,6 +157,23 @@ def cmd_recover(args):
     print("recovered in %.1f s -> %s" % (result.seconds, args.out))
 
 
+def cmd_batch(args):
+    """Returns the exit status: 0 if every row is recovered, else 1."""
+    config = _config(args)                          # bad settings fail before any work
+    args.interrupted = "the finished rows are kept in %s (a rerun does the rest)" % args.out
+    counts = {}
+    for name, status, reason in recover_many(args.manifest, args.out, workers=args.workers, config=config,
+                                             srgb=args.srgb, white_level=args.white_level, progress=True,
+                                             scheduler=args.scheduler):
+        counts[status] = counts.get(status, 0) + 1
+        if status == FAILED:                        # the rows failing the checks first, together
+            tqdm.write("  %s: %s" % (name, reason), file=sys.stderr)
+    print("batch: %d recovered, %d complete before, %d failed -> %s" % (
+        counts.get("done", 0), counts.get("skipped", 0), counts.get(FAILED, 0),
+        os.path.join(args.out, "summary.html")))
+    return 1 if counts.get(FAILED) else 0
+
+
 def cmd_relight(args):
     r = relight(args.material, args.out, envmap=args.envmap, shape=args.shape, scene=args.scene,
                 shape_id=args.shape_id, res=args.res, spp=args.spp, force=args.force)
@@ -245,6 +264,23 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an earlier result directory")
     p.set_defaults(func=cmd_recover)
 
+    p = sub.add_parser("batch", help="recover many images listed in a manifest, one result folder each",
+                       epilog=ALIAS_TABLE, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("manifest", help="CSV (with a header) or JSON list of rows: image, and scene or sphere (true), "
+                                    "optional mask, light, fov (with sphere) and name (default the image's stem); "
+                                    "paths relative to the manifest's folder")
+    p.add_argument("--out", required=True, help="output folder: OUT/<name>/ per row, OUT/summary.csv, summary.html")
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes (default: the number of cores, %d)" % (os.cpu_count() or 1))
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the rows on the Dask cluster of this scheduler (tcp://HOST:PORT) instead; its "
+                        "workers must see the same paths")
+    p.add_argument("--srgb", action="store_true", help="the images are 8-bit sRGB (PNG/JPEG): linearise them")
+    p.add_argument("--white-level", default=None, type=float, nargs="+", metavar="LEVEL",
+                   help="the camera's white level of every image, one value or three (R G B) (see recover)")
+    _config_arguments(p, "default")
+    p.set_defaults(func=cmd_batch)
+
     p = sub.add_parser("relight", help="render a recovered material under a new map or in your own scene")
     p.add_argument("material", help="material.json (from recover) or a library material name")
     p.add_argument("--envmap", default=None, help="lat-long HDR/EXR illumination map")
@@ -294,14 +330,14 @@ def main(argv=None):
     try:
         with _stopped_by_signals(received):
             _setup(args.variant)
-            args.func(args)
+            status = args.func(args)
     except KeyboardInterrupt:
-        print("mi-dsbrdf: interrupted; nothing written", file=sys.stderr)
+        print("mi-dsbrdf: interrupted; %s" % getattr(args, "interrupted", "nothing written"), file=sys.stderr)
         return 128 + (received[0] if received else signal.SIGINT)
     except (MiDsbrdfError, OSError) as e:
         print("mi-dsbrdf: %s" % e, file=sys.stderr)
         return 1
-    return 0
+    return status or 0
 
 
 if __name__ == "__main__":

@@ -1,0 +1,386 @@
+"""``mi_dsbrdf.recover_many`` and ``mi-dsbrdf batch``: many images, one result folder each.
+
+A manifest lists one image per row, as a CSV file with a header or a JSON list
+of objects, with the fields
+
+    image    the image file (required)
+    mask     an optional mask file
+    scene    a scene XML, or
+    sphere   true: the image is a photograph of a sphere (the scene is built from
+             its outline, :mod:`mi_dsbrdf.app.photo`), with the optional
+             ``light`` (envmap, directional, point) and ``fov`` (degrees)
+    name     the row's result folder under the output folder (default: the
+             image's file name without its extension); names are unique
+
+Paths are relative to the manifest's folder. Every row is checked (its files
+read, its fields parsed) before any work; a row that fails the checks is
+reported with a one-line reason and the others run. Each row's result folder,
+``OUT/<name>/``, is written whole or not at all by
+:meth:`~mi_dsbrdf.app.result.Result.save`; a row whose folder is complete (it
+has log.json) is skipped, so a rerun after an interruption does only the rest.
+A row that raises is recorded with its reason and the batch goes on.
+
+Rows run in worker processes (``multiprocessing``'s spawn context: each process
+keeps its Dr.Jit state and the loaded reflectance model from row to row), in
+this process with one worker, or on the workers of a Dask cluster (its
+scheduler's address, or a ``dask.distributed.Client``). At the end ``OUT/summary.csv`` and
+``OUT/summary.html`` are written from every row's result folder.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import multiprocessing
+import os
+import signal
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+from tqdm import tqdm
+
+from mi_dsbrdf.app.batch_summary import DONE, FAILED, SKIPPED, complete, one_line_reason, write_summary
+from mi_dsbrdf.app.io import check_out
+from mi_dsbrdf.app.photo import LIGHTS, photo_scene
+from mi_dsbrdf.app.recover import load_inputs, resolve_config
+from mi_dsbrdf.app.result import RESULT_FILES
+from mi_dsbrdf.config import Config
+from mi_dsbrdf.errors import InputError, MiDsbrdfError
+
+#: the fields a manifest row may have
+FIELDS = ("name", "image", "mask", "scene", "sphere", "light", "fov")
+
+
+@dataclasses.dataclass(frozen=True)
+class Row:
+    """One image of a batch: absolute paths and the scene's description.
+
+    Attributes
+    ----------
+    name : the result folder's name under the output folder
+    image : the image file; mask : the mask file or None
+    scene : the scene XML, or None for a photograph of a sphere (``sphere``)
+    light : with ``sphere``: envmap, directional or point; fov : with ``sphere``:
+        the horizontal field of view in degrees, or None (orthographic)
+    """
+    name: str
+    image: str
+    mask: str | None = None
+    scene: str | None = None
+    light: str | None = None
+    fov: float | None = None
+
+    @property
+    def sphere(self) -> bool:
+        return self.scene is None
+
+
+def read_manifest(path) -> list:
+    """The rows of the manifest ``path`` (CSV with a header, or a JSON list of
+    objects) as dicts of their non-empty fields, paths still as written.
+    InputError (one line) if it does not read, has no ``image`` field or unknown
+    fields."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise InputError("manifest %s does not exist" % path)
+    try:
+        with open(path, newline="") as f:
+            text = f.read()
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError("manifest %s does not read: %s" % (path, e)) from None
+    if path.lower().endswith(".json"):
+        try:
+            rows = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise InputError("manifest %s is not valid JSON: %s" % (path, e)) from None
+        if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+            raise InputError("manifest %s: give a JSON list of objects, one per image" % path)
+        fields = {k for r in rows for k in r}
+    else:
+        reader = csv.DictReader(text.splitlines())
+        fields = set(reader.fieldnames or ())
+        rows = [{k: v for k, v in r.items() if k is not None} for r in reader]
+        if any(None in r for r in csv.DictReader(text.splitlines())):
+            raise InputError("manifest %s: a row has more values than the header has columns" % path)
+    if not rows:
+        raise InputError("manifest %s has no rows" % path)
+    if "image" not in fields:
+        raise InputError("manifest %s has no \"image\" column: give a header with image and scene (or sphere)"
+                         % path)
+    unknown = sorted(fields - set(FIELDS))
+    if unknown:
+        raise InputError("manifest %s: unknown column%s %s (known: %s)" % (
+            path, "s" if len(unknown) > 1 else "", ", ".join(unknown), ", ".join(FIELDS)))
+    return [{k: v for k, v in r.items() if v not in (None, "")} for r in rows]
+
+
+def _truth(value, what) -> bool:
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("true", "yes", "1"):
+        return True
+    if text in ("false", "no", "0", ""):
+        return False
+    raise InputError("%s %r: give true or false" % (what, value))
+
+
+def parse_row(fields: dict, base=".") -> Row:
+    """A :class:`Row` of a manifest row's ``fields`` (paths relative to ``base``);
+    InputError (one line) for a bad field or a missing file."""
+    def path(key):
+        value = fields.get(key)
+        if value is None:
+            return None
+        if not isinstance(value, (str, os.PathLike)):
+            raise InputError("%s %r: give a file path" % (key, value))
+        p = os.path.normpath(os.path.join(base, os.fspath(value)))
+        if not os.path.isfile(p):
+            raise InputError("%s file %s does not exist" % (key, p))
+        return p
+    if fields.get("image") is None:
+        raise InputError("no image")
+    image, mask, scene = path("image"), path("mask"), path("scene")
+    sphere = _truth(fields.get("sphere", False), "sphere")
+    if (scene is None) == (not sphere):
+        raise InputError("give a scene file, or sphere true for a photograph of a sphere (not both)")
+    light, fov = fields.get("light"), fields.get("fov")
+    if scene is not None and (light is not None or fov is not None):
+        raise InputError("light and fov describe the scene sphere builds; a scene file brings its own")
+    if light is not None and light not in LIGHTS:
+        raise InputError("light %r: give one of %s" % (light, ", ".join(LIGHTS)))
+    if fov is not None:
+        try:
+            fov = float(fov)
+        except (TypeError, ValueError):
+            raise InputError("fov %r: give degrees, a number in (0, 180)" % (fov,)) from None
+        if not 0 < fov < 180:
+            raise InputError("fov %g: give degrees in (0, 180)" % fov)
+    name = fields.get("name")
+    name = os.path.splitext(os.path.basename(image))[0] if name is None else str(name)
+    if name in (".", "..") or os.sep in name or (os.altsep and os.altsep in name):
+        raise InputError("name %r: give a folder name (no path separators)" % name)
+    return Row(name=name, image=image, mask=mask, scene=scene, light=light or ("envmap" if sphere else None),
+               fov=fov)
+
+
+def _name_of(fields, i) -> str:
+    """A row's name for messages before it is parsed: its name, else its image's
+    stem, else its number."""
+    if fields.get("name") is not None:
+        return str(fields["name"])
+    if isinstance(fields.get("image"), str):
+        return os.path.splitext(os.path.basename(fields["image"]))[0]
+    return "row %d" % (i + 1)
+
+
+def check_rows(rows, base=".", srgb=False) -> tuple:
+    """(the good :class:`Row` s, {name: one-line reason} of the rows that fail the
+    checks). ``rows``: dicts (manifest rows, paths relative to ``base``) or Rows.
+    Each row's image and mask are read and checked
+    (:func:`~mi_dsbrdf.app.recover.load_inputs`), and a sphere's outline fitted
+    (:func:`~mi_dsbrdf.app.photo.photo_scene`). InputError if two rows share a
+    name."""
+    names = [r.name if isinstance(r, Row) else _name_of(r, i) for i, r in enumerate(rows)]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError("manifest rows share the name%s %s: give each row a unique name column"
+                         % ("s" if len(dup) > 1 else "", ", ".join(dup)))
+    good, bad = [], {}
+    for fields, name in zip(rows, names):
+        try:
+            row = fields if isinstance(fields, Row) else parse_row(fields, base)
+            if row.sphere:                          # the outline fits (reads the image and mask)
+                photo_scene(row.image, row.mask, light=row.light or "envmap", fov=row.fov, srgb=srgb)
+            else:
+                load_inputs(row.image, row.mask, srgb)
+        except MiDsbrdfError as e:
+            bad[name] = one_line_reason(e)
+            continue
+        good.append(row)
+    return good, bad
+
+
+def _stop(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _init_worker(variant):
+    """A worker process's start: the parent's Mitsuba variant; SIGTERM and SIGHUP
+    stop it as Ctrl-C does (a KeyboardInterrupt, which removes the result folder
+    it was writing)."""
+    import mitsuba as mi
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _stop)
+
+    import mi_dsbrdf  # noqa: F401  (variant, plugins)
+    if variant and mi.variant() != variant:
+        mi.set_variant(variant)
+
+
+def _run_row(row: Row, folder, config: Config, srgb=False, white_level=None) -> tuple:
+    """Recover one row into ``folder``: (status, reason, seconds). Never raises
+    for a failed row: the reason is returned (exceptions need not pickle)."""
+    from mi_dsbrdf.app.recover import recover_files
+    t0 = time.perf_counter()
+    try:
+        scene = row.scene
+        if scene is None:
+            scene, _ = photo_scene(row.image, row.mask, light=row.light or "envmap", fov=row.fov, srgb=srgb)
+        force = os.path.isdir(folder)          # an incomplete earlier folder: replaced (foreign files refused)
+        recover_files(scene, row.image, folder, mask_file=row.mask, force=force, config=config, progress=False,
+                      srgb=srgb, white_level=white_level)
+    except Exception as e:  # noqa: BLE001  (a failed row is recorded, the batch goes on)
+        return FAILED, one_line_reason(e), time.perf_counter() - t0
+    return DONE, "", time.perf_counter() - t0
+
+
+def recover_many(rows, out, workers=None, config: Config | str = None, base=".", srgb=False, white_level=None,
+                 progress=False, failures=None, scheduler=None):
+    """Recover every row of a batch, one result folder each (``out/<name>/``),
+    yielding ``(name, status, reason)`` as rows finish.
+
+    Parameters
+    ----------
+    rows : manifest rows (dicts of :data:`FIELDS`, paths relative to ``base``),
+        :class:`Row` s, or the path of a manifest (CSV or JSON; ``base`` is then
+        its folder)
+    out : the output folder (created); each row's result in ``out/<name>/``
+    workers : processes (default ``os.cpu_count()``); 1 runs the rows in this process
+    config : :class:`~mi_dsbrdf.config.Config` or a preset's name, for every row
+    srgb, white_level : as :func:`mi_dsbrdf.recover` takes them, for every row
+    progress : a tqdm bar over the rows (done and failed in its postfix)
+    failures : an optional dict that receives {name: reason} of the failed rows
+    scheduler : the address of a Dask scheduler (``tcp://HOST:PORT``) or a
+        ``dask.distributed.Client``: the rows run on its workers (``workers`` is
+        then unused), which must see the same paths and have mi-dsbrdf installed
+
+    Yields
+    ------
+    (name, status, reason): status ``"failed"`` (rows that fail the checks come
+    first, before any work), ``"skipped"`` (complete from an earlier run) or
+    ``"done"``; reason is a one-line message for a failure, else "".
+
+    Raises
+    ------
+    InputError : a bad manifest (unreadable, no image column, shared names) or
+    output folder, before any work. At the end (also when the generator is
+    closed or interrupted) ``out/summary.csv`` and ``out/summary.html`` are
+    written for the rows.
+    """
+    cfg = resolve_config(config)
+    if isinstance(rows, (str, os.PathLike)):
+        base = os.path.dirname(os.path.abspath(os.fspath(rows)))
+        rows = read_manifest(rows)
+    rows = list(rows)
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise InputError("workers must be a whole number of at least 1, got %r" % (workers,))
+    out = os.path.abspath(os.fspath(out))
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise InputError("output %s is a file, not a folder: choose a folder name" % out)
+    good, bad = check_rows(rows, base, srgb)
+    os.makedirs(out, exist_ok=True)
+    failed = {} if failures is None else failures
+    failed.update(bad)
+    seconds = {}
+    order = [r.name for r in good] + list(bad)
+    bar = tqdm(total=len(order), desc="batch", unit="image", disable=not progress, file=sys.stderr)
+    counts = {"done": 0, "failed": 0}
+
+    def finish(name, status, reason):
+        if status == FAILED:
+            failed[name] = reason
+            counts["failed"] += 1
+        else:
+            counts["done"] += 1
+        bar.set_postfix(counts, refresh=False)
+        bar.update()
+        return name, status, reason
+    try:
+        for name, reason in bad.items():
+            yield finish(name, FAILED, reason)
+        todo = []
+        for row in good:
+            folder = os.path.join(out, row.name)
+            if complete(folder):
+                yield finish(row.name, SKIPPED, "")
+                continue
+            try:
+                check_out(folder, os.path.isdir(folder), RESULT_FILES, [row.image, row.mask, row.scene])
+            except MiDsbrdfError as e:
+                yield finish(row.name, FAILED, one_line_reason(e))
+                continue
+            todo.append(row)
+        if scheduler is not None:
+            yield from _dask(todo, out, cfg, srgb, white_level, scheduler, finish, seconds)
+        elif workers == 1 or len(todo) <= 1:
+            for row in todo:
+                status, reason, seconds[row.name] = _run_row(row, os.path.join(out, row.name), cfg, srgb, white_level)
+                yield finish(row.name, status, reason)
+        else:
+            yield from _pool(todo, out, cfg, srgb, white_level, min(workers, len(todo)), finish, seconds)
+    finally:
+        bar.close()
+        write_summary(out, [r.name for r in good] + list(bad), failed, seconds)
+
+
+def _pool(todo, out, cfg, srgb, white_level, workers, finish, seconds):
+    """Run ``todo`` in ``workers`` spawned processes, yielding as rows finish. A
+    process that dies fails its row; the rows not started are cancelled on an
+    interruption."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.backend import one_blas_thread
+    one_blas_thread()
+    ex = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker,
+                             initargs=(mi.variant(),))
+    try:
+        pending = {ex.submit(_run_row, row, os.path.join(out, row.name), cfg, srgb, white_level): row.name
+                   for row in todo}
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                name = pending.pop(fut)
+                try:
+                    status, reason, seconds[name] = fut.result()
+                except BrokenProcessPool:
+                    status, reason = FAILED, "its worker process died (out of memory?); a rerun retries it"
+                yield finish(name, status, reason)
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
+
+
+def _dask(todo, out, cfg, srgb, white_level, scheduler, finish, seconds):
+    """Run ``todo`` on a Dask cluster, yielding as rows finish; a row whose worker
+    is lost (or that fails on the cluster's side) is failed with the reason."""
+    try:
+        from dask.distributed import Client, as_completed
+    except ImportError:
+        raise InputError("a --scheduler needs Dask: pip install 'dask[distributed]'") from None
+    own = not isinstance(scheduler, Client)
+    if own:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as e:
+            raise InputError("Dask scheduler %s does not answer: %s" % (scheduler, one_line_reason(e))) from None
+    else:
+        client = scheduler
+    names = {}
+    try:
+        names = {client.submit(_run_row, row, os.path.join(out, row.name), cfg, srgb, white_level,
+                               pure=False): row.name for row in todo}
+        for fut in as_completed(list(names)):
+            name = names.pop(fut)
+            try:
+                status, why, seconds[name] = fut.result()
+            except Exception as e:  # noqa: BLE001  (a lost worker, a cancelled task: the row fails)
+                status, why = FAILED, one_line_reason(e)
+            yield finish(name, status, why)
+    finally:
+        for fut in names:                       # not started (an interruption): cancelled
+            fut.cancel()
+        if own:
+            client.close()
