@@ -133,3 +133,12 @@ def test_on_a_dask_cluster(folder, tmp_path):
         got = list(recover_many(_manifest(folder, ROWS), tmp_path / "out", config=QUICK_CONFIG, scheduler=client))
     assert sorted(s for _, s, _ in got) == ["done", "done", "failed"]
     assert (tmp_path / "out" / "gold" / "log.json").is_file() and (tmp_path / "out" / "summary.html").is_file()
+
+
+def test_a_spreadsheet_csv_with_a_bom_and_spaced_header_reads(tmp_path):
+    """Excel's "CSV UTF-8" starts with a byte-order mark; hand-written headers have spaces."""
+    from mi_dsbrdf.app.batch import read_manifest
+    path = tmp_path / "m.csv"
+    path.write_bytes(b"\xef\xbb\xbf image , scene , name \r\nphoto.exr , scene.xml , a\r\n")
+    rows = read_manifest(path)
+    assert rows == [{"image": "photo.exr", "scene": "scene.xml", "name": "a"}]

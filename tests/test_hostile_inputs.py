@@ -364,3 +364,11 @@ def test_check_out_of_a_clean_destination_changes_nothing(tmp_path):
     (tmp_path / ".mine").mkdir()
     check_out(tmp_path / "out")
     assert listing(tmp_path) == [".mine"]
+
+
+@pytest.mark.parametrize("args", [["--spp", "0"], ["--spp", "-1"], ["--spp", "100000000000"],
+                                  ["--param", "res=0"]])
+def test_render_refuses_bad_samples_and_film_sizes_in_one_line(args, tmp_path, capsys):
+    assert main(["render", "sphere_envmap", "--out", str(tmp_path / "r")] + args) == 1
+    one_line(capsys, "mi-dsbrdf:")
+    assert not (tmp_path / "r").exists()

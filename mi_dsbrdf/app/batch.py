@@ -86,7 +86,7 @@ def read_manifest(path) -> list:
     if not os.path.isfile(path):
         raise InputError("manifest %s does not exist" % path)
     try:
-        with open(path, newline="") as f:
+        with open(path, newline="", encoding="utf-8-sig") as f:          # a spreadsheet's BOM ignored
             text = f.read()
     except (OSError, UnicodeDecodeError) as e:
         raise InputError("manifest %s does not read: %s" % (path, e)) from None
@@ -99,9 +99,10 @@ def read_manifest(path) -> list:
             raise InputError("manifest %s: give a JSON list of objects, one per image" % path)
         fields = {k for r in rows for k in r}
     else:
-        reader = csv.DictReader(text.splitlines())
-        fields = set(reader.fieldnames or ())
-        rows = [{k: v for k, v in r.items() if k is not None} for r in reader]
+        reader = csv.DictReader(text.splitlines(), skipinitialspace=True)
+        reader.fieldnames = [f.strip() for f in reader.fieldnames or ()]       # " image , scene " is image, scene
+        fields = set(reader.fieldnames)
+        rows = [{k: v.strip() if isinstance(v, str) else v for k, v in r.items() if k is not None} for r in reader]
         if any(None in r for r in csv.DictReader(text.splitlines())):
             raise InputError("manifest %s: a row has more values than the header has columns" % path)
     if not rows:

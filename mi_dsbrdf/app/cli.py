@@ -212,7 +212,7 @@ def parser() -> argparse.ArgumentParser:
     p = sub.add_parser("render", help="render a scene XML to EXR + PNG")
     p.add_argument("scene", help="scene XML path or shipped scene name")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--spp", type=int, default=None)
+    p.add_argument("--spp", type=int, default=None, help="samples per pixel, 1 to 16384 (default: the scene's own)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="override a scene <default> (repeatable)")
     p.add_argument("--force", action="store_true", help="replace earlier renders of the scene in --out")

@@ -16,11 +16,20 @@ from mi_dsbrdf.model.library import library_names
 
 
 def render_scene(scene_file, spp=None, **params) -> np.ndarray:
-    """Render a scene XML (with ``<default>`` overrides ``params``) to (H, W, 3) float32."""
+    """Render a scene XML (with ``<default>`` overrides ``params``) to (H, W, 3)
+    float32, at ``spp`` samples per pixel (None: the scene's own)."""
+    if spp is not None:
+        _positive(spp, "--spp")
     try:
         scene = mi.load_file(os.fspath(scene_file), **{k: str(v) for k, v in params.items()})
     except Exception as e:  # noqa: BLE001  (Mitsuba raises RuntimeError subclasses with varied text)
         raise InputError("scene %s does not load: %s" % (scene_file, str(e).splitlines()[-1])) from None
+    if not scene.sensors():
+        raise InputError("scene %s has no camera: add a <sensor>" % scene_file)
+    size = scene.sensors()[0].film().crop_size()
+    if min(int(size[0]), int(size[1])) < 1:
+        raise InputError("scene %s has a %dx%d film: give a film of at least 1x1 pixels"
+                         % (scene_file, size[0], size[1]))
     img = np.array(mi.render(scene, spp=spp or 0), dtype=np.float32)
     bad = ~np.isfinite(img)
     if bad.any():
