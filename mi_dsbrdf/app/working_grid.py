@@ -23,6 +23,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_dsbrdf.inference.forward import centre_hits
 from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.pixels import usable_pixels
 
@@ -215,16 +216,9 @@ def object_mask(scene, shape, rows=None) -> np.ndarray:
     W, H = (int(v) for v in scene.sensors()[0].film().crop_size())
     rows = rows or max(1, TRACE_PIXELS // W)
     out = np.zeros((H, W), bool)
-    target = np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape)))
     for r0 in range(0, H, rows):
         n = min(rows, H - r0)
-        sensor = _BlockSensor(scene.sensors()[0], (W, n), 1, (r0, 0))
-        ys, xs = np.mgrid[0:n, 0:W]
-        uv = mi.Point2f(((xs.reshape(-1) + 0.5) / W).astype(np.float32),
-                        ((ys.reshape(-1) + 0.5) / n).astype(np.float32))
-        ray, _ = sensor.sample_ray(0.0, 0.5, uv, mi.Point2f(0.5, 0.5))
-        si = scene.ray_intersect(ray)
-        hit = np.array(si.is_valid()) & (np.array(dr.reinterpret_array(mi.UInt32, si.shape)) == target)
+        _, hit = centre_hits(scene, _BlockSensor(scene.sensors()[0], (W, n), 1, (r0, 0)), shape)
         out[r0:r0 + n] = hit.reshape(n, W)
     return out
 

@@ -40,6 +40,20 @@ from mi_dsbrdf.inference.latlong import latlong_directions, texel_solid_angles
 CHUNK = 1 << 22
 
 
+def centre_hits(scene, sensor, shape) -> tuple:
+    """(the SurfaceInteraction of the ray through each pixel centre of ``sensor``'s
+    film, row by row; (H * W,) bool: the pixels whose centre ray sees ``shape``)."""
+    w, h = (int(v) for v in sensor.film().crop_size())
+    ys, xs = np.mgrid[0:h, 0:w]
+    uv = mi.Point2f(((xs.reshape(-1) + 0.5) / w).astype(np.float32),
+                    ((ys.reshape(-1) + 0.5) / h).astype(np.float32))
+    rays, _ = sensor.sample_ray(0.0, 0.5, uv, mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(rays)
+    hit = np.array(si.is_valid()) & (np.array(dr.reinterpret_array(mi.UInt32, si.shape)) ==
+                                     np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))
+    return si, hit
+
+
 class TexelSum:
     """Geometry of one view of one object, and the texel sums over it.
 
@@ -57,13 +71,7 @@ class TexelSum:
         sensor = scene.sensors()[0]
         w, h = (int(v) for v in sensor.film().crop_size())
         self.image_size = (h, w)
-        ys, xs = np.mgrid[0:h, 0:w]
-        uv = mi.Point2f(((xs.reshape(-1) + 0.5) / w).astype(np.float32),
-                        ((ys.reshape(-1) + 0.5) / h).astype(np.float32))
-        rays, _ = sensor.sample_ray(0.0, 0.5, uv, mi.Point2f(0.5, 0.5))
-        si = scene.ray_intersect(rays)
-        hit = np.array(si.is_valid()) & (np.array(dr.reinterpret_array(mi.UInt32, si.shape)) ==
-                                         np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))
+        si, hit = centre_hits(scene, sensor, shape)
         self.mask = hit.reshape(h, w)                      # pixels that see the object
         self.pixels = np.nonzero(hit)[0]
         idx = mi.UInt32(self.pixels.astype(np.uint32))
