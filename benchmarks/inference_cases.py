@@ -13,9 +13,12 @@
 covering about half the frame (camera fov 34 degrees) under the sky, rendered by
 Mitsuba (the same samples per 128 px working pixel at every size), recovered from
 its EXR by :func:`mi_dsbrdf.recover` with the defaults and saved (what ``mi-dsbrdf
-recover`` does). It prints each size's time, peak memory, working grid, both
-conventions of Eq. 20 and the map's error side by side, and each one's ratio to the
-128 px run (targets: time <= 1.5x, peak memory <= 1.5 GB more, errors no worse).
+recover`` does). Each size is photographed ``--seeds`` times, each with its own
+camera noise: a recovery's error swings by up to 1.3x between photographs that
+differ only by noise, so one photograph a size cannot tell a size's effect from
+chance. It prints every run, then each size's medians (time, both conventions of
+Eq. 20, the map's error; the largest peak memory) and their ratios to the 128 px
+medians (targets: time <= 1.5x, peak memory <= 1.5 GB more, errors no worse).
 
 Truth: a library material rendered by the deterministic forward model (the sky
 at twice the map's resolution). Each case runs in a fresh process (spawned one
@@ -26,7 +29,7 @@ and ``benchmarks/error_vs_time.py``; the error of these runs is printed as a che
 (the map's, and the BRDF's against the true material in both conventions of Eq. 20).
 
     .venv/bin/python benchmarks/inference_cases.py      # ~3 min
-    .venv/bin/python benchmarks/inference_cases.py --sizes 128 512 1024
+    .venv/bin/python benchmarks/inference_cases.py --sizes 128 512 1024 --seeds 3   # ~1 min a run
 
 Writes benchmarks/results/inference.json (the README quotes it) with the default
 ``--out``; ``--sizes`` writes benchmarks/results/inference_sizes.json.
@@ -120,8 +123,9 @@ def _sphere_scene(res, bsdf, sky):
             "light": {"type": "envmap", "bitmap": mi.Bitmap(sky)}}
 
 
-def _render_size(res, path, queue):
-    """Render the truth at ``res`` pixels into ``path`` (a process of its own)."""
+def _render_size(res, seed, path, queue):
+    """Render the truth at ``res`` pixels with Mitsuba's ``seed`` into ``path`` (a
+    process of its own)."""
     import mitsuba as mi
     import numpy as np
 
@@ -130,7 +134,7 @@ def _render_size(res, path, queue):
     from mi_dsbrdf.inference.latlong import procedural_sky
     sky = procedural_sky(64, 128).astype(np.float32)
     spp = max(1, round(SIZE_SPP_128 * (128 / res) ** 2))
-    img = mi.render(mi.load_dict(_sphere_scene(res, {"type": "dsbrdf", "material": MATERIAL}, sky)), spp=spp, seed=1)
+    img = mi.render(mi.load_dict(_sphere_scene(res, {"type": "dsbrdf", "material": MATERIAL}, sky)), spp=spp, seed=seed)
     write_exr(path, np.array(img, dtype=np.float32))
     queue.put({"spp": spp})
 
@@ -144,7 +148,7 @@ def _size_case(res, path, out, queue):
     import numpy as np
 
     import mi_dsbrdf
-    from mi_dsbrdf.evaluation.experiment import downsample
+    from mi_dsbrdf.evaluation.experiment import downsample, dsbrdf_bsdf, render, texels
     from mi_dsbrdf.evaluation.metrics import material_errors, scale_invariant_log_error
     from mi_dsbrdf.inference.latlong import procedural_sky
     from mi_dsbrdf.model import model_file as model_data
@@ -158,60 +162,127 @@ def _size_case(res, path, out, queue):
     seconds = time.perf_counter() - t0
     result.save(out)
     total = time.perf_counter() - t0
-    truth = model_data.shipped_model().library_material(MATERIAL)
-    errors = material_errors(result.material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    model = model_data.shipped_model()
+    truth = model.library_material(MATERIAL)
+    samples = samples_from_function(lambda th, td, pd: truth.eval(th, td))
     H, W = result.illumination.shape[:2]
-    errors["map"] = scale_invariant_log_error(result.illumination, downsample(sky, H, W), np.ones((H, W), bool))
-    queue.put({"seconds": seconds, "seconds_with_save": total, "memory_before_mb": before,
-               "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    all_texels = np.ones((H, W), bool)
+    # relit: a 48 px sphere under the sky turned by 90 degrees, against the truth's
+    turned = np.roll(downsample(sky, 32, 64), 16, axis=1).reshape(-1, 3)
+    relit_truth = render(texels({"type": "dsbrdf", "material": MATERIAL}, 48, (32, 64)), turned)
+    on = texels({"type": "dsbrdf"}, 48, (32, 64)).mask
+
+    def relit(material):
+        return scale_invariant_log_error(render(texels(dsbrdf_bsdf(material), 48, (32, 64)), turned),
+                                         relit_truth, on)
+    errors = material_errors(result.material, samples)
+    mean = material_errors(model.mean_material(), samples)
+    queue.put({"seconds": seconds, "seconds_with_save": total, "memory_before_mb": before, "peak_memory_mb": peak,
                "working_grid": result.log["working_grid"], "used_pixels": result.log["used_pixels"],
                "brdf_eq20": {"paper": errors["paper"], "cosine": errors["cosine"]},
-               "illumination_error": errors["map"]})
+               "illumination_error": scale_invariant_log_error(result.illumination, downsample(sky, H, W),
+                                                               all_texels),
+               "relit_error": relit(result.material),
+               # doing nothing: the model's mean material, a constant map
+               "do_nothing": {"brdf_eq20": {"paper": mean["paper"], "cosine": mean["cosine"]},
+                              "illumination_error": scale_invariant_log_error(
+                                  np.ones((H, W, 3)), downsample(sky, H, W), all_texels),
+                              "relit_error": relit(model.mean_material())}})
 
 
-def run_sizes(sizes, out_json):
-    """``--sizes``: each size rendered, then recovered, in fresh processes, one after
-    the other; the table on stdout and in ``out_json``."""
+def _median(runs, *keys):
+    import numpy as np
+    values = []
+    for r in runs:
+        for k in keys:
+            r = r[k]
+        values.append(r)
+    return float(np.median(values))
+
+
+def run_sizes(sizes, seeds, out_json):
+    """``--sizes``: each size rendered with each of ``seeds`` (its own camera noise),
+    then recovered, in fresh processes, one after the other; the table on stdout and
+    in ``out_json``. A size's figures are the medians over its seeds (the peak memory
+    is the largest), and its ratios are to the 128 px medians."""
     import tempfile
     sizes = [128] + [s for s in sizes if s != 128]        # the reference first
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for res in sizes:
-            path = os.path.join(tmp, "sphere_%d.exr" % res)
-            rendered = run(_render_size, res, path)
-            results[res] = dict(run(_size_case, res, path, os.path.join(tmp, "result_%d" % res)), **rendered)
-            r, ref = results[res], results[128]
+            runs = []
+            for seed in seeds:
+                path = os.path.join(tmp, "sphere_%d_%d.exr" % (res, seed))
+                rendered = run(_render_size, res, seed, path)
+                r = dict(run(_size_case, res, path, os.path.join(tmp, "result_%d_%d" % (res, seed))),
+                         seed=seed, **rendered)
+                runs.append(r)
+                print("%5d px  seed %d  %6.1f s  peak %6.0f MB  BRDF Eq. 20 paper %.3f, cosine %.3f  map %.3f  "
+                      "relit %.3f" % (res, seed, r["seconds"], r["peak_memory_mb"], r["brdf_eq20"]["paper"],
+                                      r["brdf_eq20"]["cosine"], r["illumination_error"], r["relit_error"]),
+                      flush=True)
+            results[res] = r = {
+                "runs": runs, "working_grid": runs[0]["working_grid"], "spp": runs[0]["spp"],
+                "seconds": _median(runs, "seconds"),
+                "peak_memory_mb": max(x["peak_memory_mb"] for x in runs),
+                "brdf_eq20": {"paper": _median(runs, "brdf_eq20", "paper"),
+                              "cosine": _median(runs, "brdf_eq20", "cosine")},
+                "illumination_error": _median(runs, "illumination_error"),
+                "relit_error": _median(runs, "relit_error"), "do_nothing": runs[0]["do_nothing"]}
+            ref = results[128]
             r["time_ratio"] = r["seconds"] / ref["seconds"]
             r["extra_memory_mb"] = r["peak_memory_mb"] - ref["peak_memory_mb"]
             r["error_ratios"] = {"paper": r["brdf_eq20"]["paper"] / ref["brdf_eq20"]["paper"],
                                  "cosine": r["brdf_eq20"]["cosine"] / ref["brdf_eq20"]["cosine"],
-                                 "map": r["illumination_error"] / ref["illumination_error"]}
-            g = r["working_grid"]
-            print("%5d px  %6.1f s (%4.2fx)  peak %6.0f MB (%+6.0f)  grid %dx%d /%d  "
-                  "BRDF Eq. 20 paper %.3f (%4.2fx), cosine %.3f (%4.2fx)  map %.3f (%4.2fx)" % (
-                      res, r["seconds"], r["time_ratio"], r["peak_memory_mb"], r["extra_memory_mb"],
-                      g["working"][0], g["working"][1], g["block"], r["brdf_eq20"]["paper"],
-                      r["error_ratios"]["paper"], r["brdf_eq20"]["cosine"], r["error_ratios"]["cosine"],
-                      r["illumination_error"], r["error_ratios"]["map"]), flush=True)
+                                 "map": r["illumination_error"] / ref["illumination_error"],
+                                 "relit": r["relit_error"] / ref["relit_error"]}
+    print("median over seeds %s; ratios to the 128 px medians:" % ", ".join(map(str, seeds)))
+    for res, r in results.items():
+        g = r["working_grid"]
+        print("%5d px  %6.1f s (%4.2fx)  peak %6.0f MB (%+6.0f)  grid %dx%d /%d  "
+              "BRDF Eq. 20 paper %.3f (%4.2fx), cosine %.3f (%4.2fx)  map %.3f (%4.2fx)  relit %.3f (%4.2fx)" % (
+                  res, r["seconds"], r["time_ratio"], r["peak_memory_mb"], r["extra_memory_mb"],
+                  g["working"][0], g["working"][1], g["block"], r["brdf_eq20"]["paper"],
+                  r["error_ratios"]["paper"], r["brdf_eq20"]["cosine"], r["error_ratios"]["cosine"],
+                  r["illumination_error"], r["error_ratios"]["map"], r["relit_error"], r["error_ratios"]["relit"]))
+    nothing = results[128]["do_nothing"]
+    print("doing nothing (the model's mean material, a constant map): BRDF Eq. 20 paper %.3f, cosine %.3f  "
+          "map %.3f  relit %.3f" % (nothing["brdf_eq20"]["paper"], nothing["brdf_eq20"]["cosine"],
+                                    nothing["illumination_error"], nothing["relit_error"]))
     print("targets against 128 px: time <= %gx, peak memory <= %+d MB, errors no worse (ratios <= 1)"
           % (MAX_SIZE_TIME_RATIO, MAX_SIZE_EXTRA_MB))
     os.makedirs(os.path.dirname(out_json), exist_ok=True)
     with open(out_json, "w") as f:
         json.dump({"sizes": {str(k): v for k, v in results.items()}, "material": MATERIAL, "fov": SIZE_FOV,
+                   "seeds": list(seeds),
                    "targets": {"time_ratio": MAX_SIZE_TIME_RATIO, "extra_memory_mb": MAX_SIZE_EXTRA_MB},
                    "machine": "%s, %d cores" % (platform.machine(), os.cpu_count()),
-                   "command": "python benchmarks/inference_cases.py --sizes %s" % " ".join(map(str, sizes))},
+                   "command": "python benchmarks/inference_cases.py --sizes %s --seeds %d"
+                              % (" ".join(map(str, sizes)), len(seeds))},
                   f, indent=1, sort_keys=True)
 
 
 def run(target, *args) -> dict:
     """``target(*args, queue)`` in a fresh process: the dict it puts on the queue
-    (seconds, peak_memory_mb, ...)."""
+    (seconds, peak_memory_mb, ...). Raises if the process dies without one."""
+    import queue as queues
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     proc = ctx.Process(target=target, args=args + (queue,))
     proc.start()
-    out = queue.get()
+    while True:
+        try:
+            out = queue.get(timeout=2.0)
+            break
+        except queues.Empty:
+            if not proc.is_alive():
+                try:
+                    out = queue.get(timeout=2.0)
+                    break
+                except queues.Empty:
+                    raise RuntimeError("%s%r ended with exit code %s and no result"
+                                       % (target.__name__, args, proc.exitcode)) from None
     proc.join()
     return out
 
@@ -223,9 +294,13 @@ def main(argv=None):
                          "inference_sizes.json)")
     ap.add_argument("--sizes", type=int, nargs="+", default=None, metavar="PX",
                     help="instead: the sphere photographed at each of these sizes (square, pixels)")
+    ap.add_argument("--seeds", type=int, default=3, metavar="N",
+                    help="with --sizes: photographs a size, each with its own camera noise (default 3); "
+                         "a size's figures are their medians")
     args = ap.parse_args(argv)
     if args.sizes:
-        return run_sizes(args.sizes, args.out or os.path.join(ROOT, "benchmarks", "results", "inference_sizes.json"))
+        return run_sizes(args.sizes, range(1, args.seeds + 1),
+                         args.out or os.path.join(ROOT, "benchmarks", "results", "inference_sizes.json"))
     results = {name: run(_case, name) for name in
                ("envmap_128px_32x64_two_pass", "principled_adam_150it_8spp", "point_light_128px",
                 "envmap_128px_32x64_two_pass_all_pixels")}
