@@ -63,6 +63,7 @@ def test_batch_runs_the_good_rows_reports_the_bad_and_resumes(folder, tmp_path, 
     assert [table[n]["status"] for n in ("gold", "blue", "lost")] == ["done", "done", "failed"]
     assert "does not exist" in table["lost"]["reason"] and "\n" not in table["lost"]["reason"]
     assert float(table["gold"]["seconds"]) > 0 and table["gold"]["light"].startswith("directional")
+    assert 0 < float(table["gold"]["residual"]) < 0.5 and table["lost"]["residual"] == ""
     assert "log_kappa_0_0" in table["gold"] and "chromaticity_0_0" in table["gold"]
     page = (out / "summary.html").read_text()
     for t in ("input.png", "rerender.png", "material.png"):
@@ -80,6 +81,48 @@ def test_batch_runs_the_good_rows_reports_the_bad_and_resumes(folder, tmp_path, 
     assert (out / "blue" / "log.json").is_file()
     with open(out / "summary.csv") as f:
         assert [r["status"] for r in csv.DictReader(f)] == ["done", "done", "failed"]
+
+    # a rerun with other settings would skip results recovered with the earlier ones: refused, nothing touched
+    stamps = {n: os.stat(out / n / "log.json").st_mtime_ns for n in ("gold", "blue")}
+    other = ["--preset", "fast", "--max-rounds", "2", "--block-iters", "3"]
+    assert main(["batch", str(manifest), "--out", str(out), "--workers", "1"] + other) == 1
+    err = capsys.readouterr().err
+    assert "holds 2 results recovered with other settings (max_rounds 1, now 2)" in err and err.count("\n") == 1
+    assert {n: os.stat(out / n / "log.json").st_mtime_ns for n in ("gold", "blue")} == stamps
+    # --max-memory does not change a result: the rerun with it skips both
+    assert main(["batch", str(manifest), "--out", str(out), "--workers", "1", "--max-memory", "20"] + QUICK) == 1
+    assert {n: os.stat(out / n / "log.json").st_mtime_ns for n in ("gold", "blue")} == stamps
+
+
+def test_relative_residual_in_bands_equals_the_whole():
+    from mi_dsbrdf.app.recover import relative_residual
+    rng = np.random.default_rng(0)
+    image, rerender = rng.random((7, 5, 3)) + 0.1, rng.random((7, 5, 3)) + 0.1
+    used = rng.random((7, 5)) > 0.3
+    whole = np.abs(rerender[used] - image[used]).sum() / image[used].sum()
+    assert relative_residual(image, rerender, used, band=2) == pytest.approx(whole, rel=1e-12)
+    assert relative_residual(image, image, used) == 0.0
+
+
+def test_workers_share_the_cores_as_dr_jit_threads():
+    """Each worker gets its share of the cores, but at least two threads."""
+    from mi_dsbrdf.app.batch import threads_per_worker
+    assert [threads_per_worker(16, 4), threads_per_worker(8, 3), threads_per_worker(2, 2),
+            threads_per_worker(1, 4)] == [4, 2, 2, 2]
+
+
+@pytest.mark.slow
+def test_one_dr_jit_thread_hangs_mitsubas_exr_reader():
+    """Why a worker keeps two threads (batch.MIN_THREADS): with one, reading an EXR
+    never returns (mitsuba 3.9, drjit 1.5). Fails once a release fixes it."""
+    import subprocess
+    import sys
+    read = ("import sys, drjit as dr, mitsuba as mi; mi.set_variant('scalar_rgb'); dr.set_thread_count(%d); "
+            "mi.Bitmap(sys.argv[1])")
+    sky = scene_path("sphere_envmap").replace("sphere_envmap.xml", "textures/sky.exr")
+    assert subprocess.run([sys.executable, "-c", read % 2, sky], timeout=60).returncode == 0
+    with pytest.raises(subprocess.TimeoutExpired):
+        subprocess.run([sys.executable, "-c", read % 1, sky], timeout=10)
 
 
 @pytest.mark.parametrize("rows, message", [
@@ -133,6 +176,20 @@ def test_on_a_dask_cluster(folder, tmp_path):
         got = list(recover_many(_manifest(folder, ROWS), tmp_path / "out", config=QUICK_CONFIG, scheduler=client))
     assert sorted(s for _, s, _ in got) == ["done", "done", "failed"]
     assert (tmp_path / "out" / "gold" / "log.json").is_file() and (tmp_path / "out" / "summary.html").is_file()
+
+
+@pytest.mark.slow
+def test_a_dask_worker_with_several_threads_is_refused(folder, tmp_path):
+    """Two rows in threads of one process can crash it: such a cluster gets one line, nothing runs."""
+    from dask.distributed import Client, LocalCluster
+
+    from mi_dsbrdf.errors import InputError
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        with pytest.raises(InputError, match="runs several tasks at once: start the workers with --nthreads 1"):
+            list(recover_many(_manifest(folder, ROWS[:2]), tmp_path / "out", config=QUICK_CONFIG,
+                              scheduler=client))
+    assert not (tmp_path / "out" / "gold").exists()
 
 
 def test_a_spreadsheet_csv_with_a_bom_and_spaced_header_reads(tmp_path):

@@ -57,7 +57,8 @@ def _light_text(folder, log) -> str:
 
 def summary_rows(out, names, failures=None, seconds=None) -> list:
     """One dict per row of the summary: name, status, reason, seconds (the
-    recovery's wall time: its stages, or as measured for a failure), peak memory,
+    recovery's wall time: its stages, or as measured for a failure), the
+    re-render's relative L1 residual over the used pixels, peak memory,
     the final negative log posterior, the light's summary, and the material's
     parameters flattened (``log_kappa_0_1``, ...), from each result folder."""
     failures, seconds = failures or {}, seconds or {}
@@ -77,7 +78,8 @@ def summary_rows(out, names, failures=None, seconds=None) -> list:
             else:
                 stages = log.get("stages", {}).values()
                 rounds = log.get("rounds") or [{}]
-                row.update(status=DONE, seconds="%.2f" % sum(s.get("seconds", 0) for s in stages),
+                row.update(status=DONE, residual="%.4f" % log["residual"] if "residual" in log else "",
+                           seconds="%.2f" % sum(s.get("seconds", 0) for s in stages),
                            peak_memory_mb="%.0f" % max([s.get("peak_memory_mb", 0) for s in stages] or [0]),
                            neg_log_posterior="%.6g" % rounds[-1]["neg_log_posterior"]
                            if "neg_log_posterior" in rounds[-1] else "",
@@ -115,8 +117,8 @@ def write_summary(out, names, failures=None, seconds=None) -> None:
 def _html(out, table) -> str:
     e = html.escape
     done = sum(r["status"] == DONE for r in table)
-    head = ["name", "status"] + [t[:-4] for t in THUMBNAILS] + ["light", "seconds", "peak MB", "-log posterior",
-                                                                 "reason"]
+    head = ["name", "status"] + [t[:-4] for t in THUMBNAILS] + ["light", "residual", "seconds", "peak MB",
+                                                                 "-log posterior", "reason"]
     lines = ["<!DOCTYPE html>", "<html><head><meta charset=\"utf-8\"><title>mi-dsbrdf batch</title>",
              "<style>body{font-family:sans-serif}table{border-collapse:collapse}td,th{border:1px solid #ccc;"
              "padding:4px;vertical-align:middle}img{width:96px;image-rendering:pixelated}"
@@ -132,8 +134,8 @@ def _html(out, table) -> str:
                 cells.append("<a href=\"%s\"><img src=\"%s\" alt=\"%s\"></a>" % (href, href, e(t)))
             else:
                 cells.append("")
-        cells += [e(str(r.get(k, ""))) for k in ("light", "seconds", "peak_memory_mb", "neg_log_posterior",
-                                                 "reason")]
+        cells += [e(str(r.get(k, ""))) for k in ("light", "residual", "seconds", "peak_memory_mb",
+                                                 "neg_log_posterior", "reason")]
         lines.append("<tr class=\"%s\">%s</tr>" % (e(r["status"]), "".join("<td>%s</td>" % c for c in cells)))
     lines += ["</table></body></html>", ""]
     return "\n".join(lines)

@@ -274,7 +274,7 @@ def parser() -> argparse.ArgumentParser:
                    help="worker processes (default: the number of cores, %d)" % (os.cpu_count() or 1))
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the rows on the Dask cluster of this scheduler (tcp://HOST:PORT) instead; its "
-                        "workers must see the same paths")
+                        "workers must see the same paths and run one task each (dask worker --nthreads 1)")
     p.add_argument("--srgb", action="store_true", help="the images are 8-bit sRGB (PNG/JPEG): linearise them")
     p.add_argument("--white-level", default=None, type=float, nargs="+", metavar="LEVEL",
                    help="the camera's white level of every image, one value or three (R G B) (see recover)")
