@@ -284,15 +284,21 @@ def test_relight_in_the_users_own_scene_and_bad_relight_inputs(tmp_path, capsys)
     m = np.ones((8, 16, 3), np.float32)
     m[2, 3] = np.inf
     write_exr(nan_map, m)
+    png_map = tmp_path / "sky.png"
+    mi.Bitmap(np.full((8, 16, 3), 128, np.uint8)).write(str(png_map))
     for args, words in (
             ([str(bad_json), "--envmap", sky], ("bad.json",)),
             (["gold-metallic-paint", "--envmap", str(nan_map)], ("NaN/Inf", "(3, 2)")),
             (["gold-metallic-paint", "--envmap", sky, "--res", "0"], ("res must be",)),
             (["gold-metallic-paint", "--scene", str(own), "--shape-id", "table"], ("no shape with id", "'ball'")),
-            (["gold-metallic-paint", "--scene", str(own)], ("--shape-id",))):
+            (["gold-metallic-paint", "--scene", str(own)], ("--shape-id",)),
+            (["gold-metallic-paint", "--envmap", sky, "--shape-id", "ball"], ("--shape-id names a shape of --scene",)),
+            (["gold-metallic-paint", "--envmap", str(png_map)], ("8-bit display values", "(EXR/HDR)"))):
         assert main(["relight"] + args + ["--out", str(tmp_path / "x.exr")]) == 1
         one_line_error(capsys, *words)
         assert not (tmp_path / "x.exr").exists()
+    assert main(["relight", "gold-metallic-paint", "--envmap", str(png_map), "--out", str(tmp_path / "x.exr")]) == 1
+    assert "--srgb" not in capsys.readouterr().err          # relight has no --srgb: not offered
 
 
 def test_all_unmeasured_merl_file_is_a_clear_error(tmp_path, capsys):

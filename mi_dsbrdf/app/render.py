@@ -106,6 +106,9 @@ def relight(material, out_file, envmap=None, shape="sphere", scene=None, shape_i
     else:
         if envmap is None:
             raise InputError("give an envmap (a lat-long HDR/EXR map) or a scene to relight in")
+        if shape_id is not None:
+            raise InputError("--shape-id names a shape of --scene; under --envmap the shape is --shape "
+                             "(sphere, torus or a mesh file)")
         res = _positive(res, "res")
         check_envmap(envmap)
         mi_scene = mi.load_dict({

@@ -61,8 +61,9 @@ def as_radiance(pixels, srgb=False, what="image") -> np.ndarray:
                          "8- or 16-bit display values (PNG/JPEG); leave it out" % (what, a.dtype))
     if a.dtype in (np.uint8, np.uint16):
         if not srgb:
-            raise InputError("%s holds %d-bit display values, not radiance: give a linear HDR image (EXR/HDR), "
-                             "or pass --srgb (srgb=True) to linearise it from sRGB" % (what, 8 * a.itemsize))
+            raise InputError("%s holds %d-bit display values, not radiance: give a linear HDR image (EXR/HDR)%s"
+                             % (what, 8 * a.itemsize, "" if what.startswith("envmap") else
+                                ", or pass --srgb (srgb=True) to linearise it from sRGB"))
         a = srgb_to_linear(a / float(np.iinfo(a.dtype).max))
     if not np.issubdtype(a.dtype, np.number) or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] > 4):
         raise InputError("%s must be an (H, W, 3) array of radiance, got %s of shape %s" % (what, a.dtype, a.shape))
