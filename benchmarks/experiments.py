@@ -140,21 +140,25 @@ def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
           "against the measured material under them.", ""]
 
     # --- summary -------------------------------------------------------------------
-    md += ["## Summary", "", "| cases | n | direction error (median / max) | Eq. 5, paper | Eq. 5, cosine | "
-           "Eq. 20, paper | Eq. 20, cosine | illumination | relit |",
-           "|---|---|---|---|---|---|---|---|---|"]
+    md += ["## Summary", "", "Eq. 20 observed: on the (θh, θd) the used pixels see under the true light "
+           "(`Material.observed`).", "",
+           "| cases | n | direction error (median / max) | Eq. 5, paper | Eq. 5, cosine | "
+           "Eq. 20, paper | Eq. 20, cosine | Eq. 20 observed, paper | Eq. 20 observed, cosine | illumination | relit |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for g in ("point", "probe"):
         for priors in (True, False):
             sel = [r for r in group[g] if r["case"]["priors"] == priors]
             if not sel:
                 continue
             d = [r.get("direction_error_deg") for r in sel if "direction_error_deg" in r]
-            md.append("| %s, %s | %d | %s | %s | %s | %s | %s | %s | %s |" % (
+            md.append("| %s, %s | %d | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
                 g, "priors" if priors else "no priors", len(sel),
                 "%.2f° / %.2f°" % (np.median(d), np.max(d)) if d else "–",
                 _median([r.get("brdf_eq5_paper") for r in sel]), _median([r.get("brdf_eq5_cosine") for r in sel]),
                 _median([r.get("brdf_eq20_paper") for r in sel]),
                 _median([r["brdf_eq20_cosine"] for r in sel]),
+                _median([r.get("brdf_eq20_observed_paper") for r in sel]),
+                _median([r.get("brdf_eq20_observed_cosine") for r in sel]),
                 _median([r.get("illumination_error") for r in sel]),
                 _median([measure(r, "relight") for r in sel])))
     md.append("")

@@ -70,6 +70,8 @@ ADAM_ITERS, ADAM_SPP = 500, 8
 ADAM_METHODS = ("principled-adam", "dsbrdf-adam")
 #: (key, label, higher is better)
 MEASURES = [("brdf_eq20_paper", "BRDF Eq. 20 paper", False), ("brdf_eq20_cosine", "BRDF Eq. 20 cosine", False),
+            ("brdf_eq20_observed_paper", "BRDF Eq. 20 paper, observed (θh, θd)", False),
+            ("brdf_eq20_observed_cosine", "BRDF Eq. 20 cosine, observed (θh, θd)", False),
             ("illumination_error", "illumination log(1 + L)", False),
             ("illumination_error_paper", "illumination log(L + 1e-6)", False), ("relight", "relit", False),
             ("relight_psnr", "relit PSNR dB", True)]

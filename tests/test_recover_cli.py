@@ -64,7 +64,8 @@ def test_recover_writes_the_result_directory(case, tmp_path, capsys):
     assert set(log["config"]) == {f.name for f in dataclasses.fields(mi_dsbrdf.Config)}
     assert log["image_size"] == [RES, RES] and log["map_size"] is None        # a directional light: no map
     assert log["image_size"] == log["working_grid"]["image"]                    # [H, W] both
-    assert list(log["stages"]) == ["checks", "inference", "re-render", "save"]
+    assert list(log["stages"]) == ["checks", "inference", "re-render", "observed directions", "save"]
+    assert 0 < log["residual"] < 0.3              # relative L1, led by the highlight
     for stage in log["stages"].values():
         assert stage["seconds"] >= 0 and 50 < stage["peak_memory_mb"] < 1e5
     # scene.xml re-renders the input with the recovered material and light, from any working directory
@@ -74,8 +75,12 @@ def test_recover_writes_the_result_directory(case, tmp_path, capsys):
     assert np.median(np.abs(np.log(rerender[lit] + e) - np.log(img[lit] + e))) < 0.05
     # the material loads into the plugin and evaluates
     from mi_dsbrdf import load_material
-    v = load_material(str(out / "material.json")).eval([0.1], [0.2])
+    found = load_material(str(out / "material.json"))
+    v = found.eval([0.1], [0.2])
     assert v.shape == (1, 3) and np.all(np.isfinite(v)) and np.all(v > 0)
+    # it records where the image looked: a lit sphere shows the highlight's theta_h, not grazing theta_h
+    seen = found.observed(np.radians([1.0, 89.0]), np.radians([30.0, 30.0]))
+    assert seen is not None and np.all(seen >= 0) and seen[1] == 0.0
 
 
 def _bad(tmp_path, img):

@@ -27,7 +27,7 @@ from mi_dsbrdf.app.io import save_preview, staged_output, write_exr
 from mi_dsbrdf.app.recover import recover_files, resolve_config
 from mi_dsbrdf.app.scenes import camera
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.evaluation.metrics import material_errors, scale_invariant_log_error
+from mi_dsbrdf.evaluation.metrics import material_errors, observed_errors, scale_invariant_log_error
 from mi_dsbrdf.inference.latlong import direction_to_uv, texel_solid_angles
 from mi_dsbrdf.model.model_file import shipped_model
 from mi_dsbrdf.model.samples import samples_from_function
@@ -88,10 +88,15 @@ def scene_xml(res, envmap) -> str:
 """ % (res, res, envmap)
 
 
+def truth_samples(truth):
+    """The MERL grid cells the fits use, valued by ``truth`` (a library material)."""
+    return samples_from_function(lambda th, td, pd: truth.eval(th, td))
+
+
 def brdf_errors(material, truth) -> dict:
     """Eq. 20 of ``material`` against ``truth`` (a library material) on the MERL
     grid cells the fits use, in both conventions: ``{"paper": .., "cosine": ..}``."""
-    return material_errors(material, samples_from_function(lambda th, td, pd: truth.eval(th, td)))
+    return material_errors(material, truth_samples(truth))
 
 
 def map_panels(truth, found, seen, height):
@@ -156,6 +161,9 @@ def _run(out, material, res, config, spp) -> dict:
               **{"brdf_eq20_%s" % c: e for c, e in brdf_errors(found, truth).items()},
               **{"mean_material_eq20_%s" % c: e
                  for c, e in brdf_errors(shipped_model().mean_material(), truth).items()},
+              # where the image looked (Material.observed > 0), and the directions it did not show
+              **{"brdf_eq20_%s_%s" % (part, c): e
+                 for part, errors in observed_errors(found, truth_samples(truth)).items() for c, e in errors.items()},
               **{"illumination_%s_after_scale" % c: scale_invariant_log_error(sky_found, sky_truth, seen, c)
                  for c in ("cosine", "paper")},
               **{"constant_map_%s_after_scale" % c: scale_invariant_log_error(np.ones_like(sky_truth), sky_truth,
@@ -190,6 +198,10 @@ matched: one image cannot fix it).*
 | same for the model's mean material (no inference) | {mean_material_eq20_paper:.3f} |
 | BRDF error, Eq. 20 cosine-weighted log(1 + f cos θi), recovered | {brdf_eq20_cosine:.3f} |
 | same for the model's mean material | {mean_material_eq20_cosine:.3f} |
+| BRDF error, Eq. 20 paper, on the (θh, θd) the image showed | {brdf_eq20_observed_paper:.3f} |
+| same on the (θh, θd) it did not show (the model's prior) | {brdf_eq20_unobserved_paper:.3f} |
+| BRDF error, Eq. 20 cosine, on the (θh, θd) the image showed | {brdf_eq20_observed_cosine:.3f} |
+| same on the (θh, θd) it did not show | {brdf_eq20_unobserved_cosine:.3f} |
 | illumination error after the best scale, log(1 + L / mean), recovered | {illumination_cosine_after_scale:.3f} |
 | same for a constant map on the same texels (no inference) | {constant_map_cosine_after_scale:.3f} |
 | illumination error after the best scale, log(L / mean + 1e-6), recovered | {illumination_paper_after_scale:.3f} |

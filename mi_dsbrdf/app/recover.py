@@ -25,6 +25,7 @@ from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import as_radiance, read_image
 from mi_dsbrdf.inference.light import SEARCH_CANDIDATES, recover_light
+from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import white_levels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
@@ -136,6 +137,12 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
             len(lit.pixels) if on_object is None else int(on_object.sum())), flush=True)
     rerender = grid_rerender(grid, lit, rec.material, L, cfg.map_pairs, on_object)
     stages["re-render"] = stage_row(t1)
+    t2 = time.perf_counter()
+    # where the image looked in (theta_h, theta_d), stored with the material (a map's
+    # texels from their centres: a quarter of the pairs, the same cells within a texel)
+    view = lit.with_map_size(lit.map_size) if needs.envmap_block else lit
+    material = rec.material.with_observed(observed_directions(view, L, np.nonzero(keep.reshape(-1)[view.pixels])[0]))
+    stages["observed directions"] = stage_row(t2)
     rows = rec.log
     from mi_dsbrdf import __version__
     log = {"version": __version__, "config": dataclasses.asdict(cfg),
@@ -146,8 +153,22 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
            "working_grid": grid.log(),
            "seconds": rec.seconds,
            "unseen_texels": rows[-1].get("unseen_texels") if rows else None}
-    return Result(material=rec.material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
-                  image=obs, used=grid.repeat(keep), rerender=rerender, scene_source=source)
+    used = grid.repeat(keep)
+    log["residual"] = relative_residual(obs, rerender, used)
+    return Result(material=material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
+                  image=obs, used=used, rerender=rerender, scene_source=source)
+
+
+def relative_residual(image, rerender, used, band=256) -> float:
+    """How far the re-render is from the image over the ``used`` pixels (H, W):
+    sum |rerender - image| / sum |image| (relative L1), in bands of rows."""
+    num = den = 0.0
+    for r in range(0, image.shape[0], band):
+        u = used[r:r + band]
+        a, b = image[r:r + band][u], rerender[r:r + band][u]
+        num += float(np.abs(b - a).sum())
+        den += float(np.abs(a).sum())
+    return num / den if den > 0 else float("nan")
 
 
 def recover_files(scene_file, image_file, out, mask_file=None, force=False, config: Config | str = None,

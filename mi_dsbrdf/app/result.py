@@ -3,7 +3,8 @@
 Result directory (the stable output contract, written by :meth:`Result.save`
 and ``mi-dsbrdf recover``):
 
-    material.json       DSBRDF parameters (``dsbrdf`` plugin ``filename``, ``load_material``)
+    material.json       DSBRDF parameters (``dsbrdf`` plugin ``filename``, ``load_material``), and
+                        where the image looked in (theta_h, theta_d) (``Material.observed``)
     illumination.exr    lat-long map, Mitsuba envmap convention (unseen texels black), each
                         texel as an 8 x 8 block (TEXEL_BLOCK)                            (envmap scenes)
     light.json          {"type", "direction": unit vector object -> light, "intensity"
@@ -12,7 +13,8 @@ and ``mi-dsbrdf recover``):
                         scene came from a file or a dict, not an ``mi.Scene``)
     log.json            the package version, the Config, the image and map sizes, what the scene
                         needed and why, every round's posterior terms and time, and each stage's
-                        (checks, inference, re-render, save) time and peak memory
+                        (checks, inference, re-render, observed directions, save) time and
+                        peak memory
     input.png, rerender.png, residual.png, material.png (spheres), illumination.png    previews
 
 The folder is written whole or not at all (:func:`~mi_dsbrdf.app.io.staged_output`).
@@ -66,7 +68,8 @@ class Result:
 
     Attributes
     ----------
-    material : the recovered :class:`~mi_dsbrdf.brdf.dsbrdf.Material`
+    material : the recovered :class:`~mi_dsbrdf.brdf.dsbrdf.Material`, recording
+        where the used pixels looked (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.observed`)
     light : {"type": "directional" | "point", "direction": (3,) unit vector from
         the object towards the light, "intensity": irradiance or W/sr,
         "position": (3,) for a point light}; None under an illumination map
@@ -76,9 +79,10 @@ class Result:
     seen : (H, W) bool texels some observed pixel sees, or None
     log : {"version", "config" (the Config's fields), "image_size" [H, W],
         "map_size" [H, W] (None without a map), "stages" {"checks", "inference",
-        "re-render": {"seconds", "peak_memory_mb"}} ("save" is added in log.json),
+        "re-render", "observed directions": {"seconds", "peak_memory_mb"}} ("save" is added in log.json),
         "needs": one line per decision about the scene, "rounds": one dict per
-        logged round (posterior terms, seconds), "seconds", ...}
+        logged round (posterior terms, seconds), "seconds", "residual" (the
+        re-render's relative L1 from the image over the used pixels), ...}
     image : (H, W, 3) float64 observed image (linear); used : (H, W) bool, the
         pixels inference used (an image larger than ``Config.working_pixels``: the
         pixels of the used blocks, :mod:`~mi_dsbrdf.app.working_grid`); rerender :

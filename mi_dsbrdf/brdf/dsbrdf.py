@@ -25,6 +25,7 @@ from scipy.special import gammaln, logsumexp
 
 from mi_dsbrdf.brdf.angles import log_cos_h
 from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
+from mi_dsbrdf.brdf.observed import DirectionWeights
 from mi_dsbrdf.brdf.xp import expm1, ops
 from mi_dsbrdf.errors import MaterialError
 
@@ -140,9 +141,12 @@ class Material:
     psi : array_like, optional
         Basis coefficients, when the material came from a learned basis
         (kept for provenance and as the starting point of refits).
+    observed : :class:`~mi_dsbrdf.brdf.observed.DirectionWeights` or its dict, optional
+        Where the image it was recovered from looked (:meth:`observed`).
     """
 
-    def __init__(self, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS, name=None, psi=None):
+    def __init__(self, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS, name=None, psi=None,
+                 observed=None):
         self.log_kappa = _as_lobe_array(log_kappa, N_CONTROL, "log_kappa")
         self.log_gamma = _as_lobe_array(log_gamma, N_CONTROL, "log_gamma")
         self.chromaticity = _as_lobe_array(chromaticity, 3, "chromaticity")
@@ -165,6 +169,8 @@ class Material:
         check_chromaticity(self.chromaticity)
         self.name = name
         self.psi = None if psi is None else np.asarray(psi, dtype=np.float64).reshape(-1)
+        self._observed = observed if observed is None or isinstance(observed, DirectionWeights) \
+            else DirectionWeights.from_dict(observed)
 
     # --- construction ------------------------------------------------------
     @classmethod
@@ -189,6 +195,19 @@ class Material:
     @property
     def n_lobes(self) -> int:
         return self.log_kappa.shape[0]
+
+    def with_observed(self, observed) -> "Material":
+        """This material recording ``observed`` (a
+        :class:`~mi_dsbrdf.brdf.observed.DirectionWeights`), as a new Material."""
+        return Material(self.log_kappa, self.log_gamma, self.chromaticity, knots=self.knots, name=self.name,
+                        psi=self.psi, observed=observed)
+
+    def observed(self, theta_h, theta_d):
+        """How much of the image's light-weighted pixel x light pairs saw each
+        (theta_h, theta_d) (radians; the share of its cell,
+        :mod:`~mi_dsbrdf.brdf.observed`), or None for a material not recovered
+        from an image. Zero: the image says nothing there, the model's prior does."""
+        return None if self._observed is None else self._observed(theta_h, theta_d)
 
     # --- evaluation (float64 reference) -----------------------------------
     def curves(self, theta_d):
@@ -220,6 +239,8 @@ class Material:
              "log_gamma": self.log_gamma.tolist(), "chromaticity": self.chromaticity.tolist()}
         if self.psi is not None:
             d["psi"] = self.psi.tolist()
+        if self._observed is not None:
+            d["observed"] = self._observed.to_dict()
         return d
 
     @classmethod
@@ -231,7 +252,7 @@ class Material:
             raise MaterialError("%s lacks %s" % (source, ", ".join(missing)))
         try:
             m = cls(d["log_kappa"], d["log_gamma"], d["chromaticity"], knots=d.get("knots", DEFAULT_KNOTS),
-                    name=d.get("name"), psi=d.get("psi"))
+                    name=d.get("name"), psi=d.get("psi"), observed=d.get("observed"))
         except MaterialError as e:
             raise MaterialError("%s: %s" % (source, e)) from None
         lobes = d.get("lobes", m.n_lobes)

@@ -80,11 +80,31 @@ def log_rmse_scale_invariant(model_values, measured_values, cos_i, convention="p
     return float(res.fun), float(np.exp(res.x))
 
 
-def material_errors(material, samples, scale_invariant=True, conventions=CONVENTIONS) -> dict:
+def material_errors(material, samples, scale_invariant=True, conventions=CONVENTIONS, where=None) -> dict:
     """Eq. 20 (or Eq. 5) of a material (anything with ``.eval(theta_h, theta_d)``,
     e.g. :class:`~mi_dsbrdf.brdf.dsbrdf.Material`) against measured
-    :class:`~mi_dsbrdf.model.samples.Samples`: ``{convention: error}``."""
+    :class:`~mi_dsbrdf.model.samples.Samples`: ``{convention: error}``; with
+    ``where`` ((N,) bool), on those samples only (NaN if none)."""
     values = material.eval(samples.theta_h, samples.theta_d)
+    measured, cos_i = samples.values, samples.cos_i
+    if where is not None:
+        where = np.asarray(where, bool).reshape(-1)
+        if not where.any():
+            return {c: float("nan") for c in conventions}
+        values, measured, cos_i = values[where], measured[where], cos_i[where]
     if scale_invariant:
-        return {c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0] for c in conventions}
-    return {c: log_rmse(values, samples.values, samples.cos_i, c) for c in conventions}
+        return {c: log_rmse_scale_invariant(values, measured, cos_i, c)[0] for c in conventions}
+    return {c: log_rmse(values, measured, cos_i, c) for c in conventions}
+
+
+def observed_errors(material, samples, conventions=CONVENTIONS) -> dict:
+    """Eq. 20 of a recovered ``material`` on the samples whose (theta_h, theta_d)
+    its image saw (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.observed` > 0), and on
+    the rest: ``{"observed": {convention: error}, "unobserved": {...}}`` (NaN
+    where there are none; None for a material that records no observation)."""
+    seen = material.observed(samples.theta_h, samples.theta_d)
+    if seen is None:
+        return None
+    seen = seen > 0
+    return {"observed": material_errors(material, samples, conventions=conventions, where=seen),
+            "unobserved": material_errors(material, samples, conventions=conventions, where=~seen)}

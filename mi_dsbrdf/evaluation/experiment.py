@@ -35,6 +35,10 @@ every method alike) and scores it:
   (scale-invariant) in the paper's convention, log(f + 1e-6), and the
   cosine-weighted one, log(1 + f cos theta_i) (:mod:`~mi_dsbrdf.evaluation.metrics`),
   for every case;
+* ``brdf_eq20_observed_paper``, ``..._cosine``, ``brdf_eq20_unobserved_...``: the same
+  on the MERL cells whose (theta_h, theta_d) the used pixels see under the true
+  light (:func:`~mi_dsbrdf.inference.lobes.observed_directions`), and on the rest;
+  ``observed_fraction``: the observed share of the cells;
 * ``brdf_eq5_paper``, ``brdf_eq5_cosine``: Eq. 5 with the known light scale
   (point lights: the BRDF times recovered / true intensity);
 * ``direction_error_deg`` (point lights);
@@ -84,6 +88,7 @@ from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import read_image
 from mi_dsbrdf.inference.light import recover_light
+from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
@@ -245,8 +250,9 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         ts = texels(merl, res, shape=shape)
         img = render(ts, point=POINT_DISTANCE * d_true)
         ts = texels({"type": "dsbrdf"}, res, shape=shape)
-        result = recover_light(ts, img, usable_pixels(ts.mask, img), model, cfg,
-                               point=(np.zeros(3), POINT_DISTANCE))
+        keep = usable_pixels(ts.mask, img)
+        where = _observed(ts.with_point(POINT_DISTANCE * d_true), np.full((1, 3), POINT_INTENSITY), keep, samples)
+        result = recover_light(ts, img, keep, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
         material, rows = result.material, result.log
         values = material.eval(samples.theta_h, samples.theta_d)
@@ -262,6 +268,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         if case.get("photons"):
             img = shot_noise(img, ts.mask, case["photons"], seed=case["id"])
         keep = usable_pixels(ts.mask, img)          # the app's pixels: the silhouette ring dropped
+        where = _observed(texels({"type": "dsbrdf"}, res, (H, W), shape=shape), downsample(truth, H, W), keep,
+                          samples)
         if method == "mean-constant":
             # doing nothing: the model's mean material (psi = 0) under a constant map
             out["seconds"] = 0.0
@@ -294,6 +302,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         out["brdf_eq20_" + c], scale = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)
         if c == "paper":
             out["brdf_eq20_paper_by_theta_d"] = log_error_by_theta_d(values, samples.values, samples.theta_d, scale)
+    out.update(_observed_errors(values, samples, where))
     if getattr(material, "psi", None) is not None:
         out["material"] = {"psi": material.psi.tolist(), "chromaticity": material.chromaticity.tolist()}
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
@@ -303,20 +312,42 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     out["relight"], out["relight_psnr"], images = relight(case, material, merl, data)
     if case["kind"] == "probe":
         images.update(maps)
-    out["baseline"] = _do_nothing(case, model, samples, merl, data, small, seen)
+    out["baseline"] = _do_nothing(case, model, samples, merl, data, small, seen, where)
     out["finite"] = _finite(out)
     out["images"] = images
     return out
 
 
-def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None) -> dict:
+def _observed(view, light, keep, samples) -> np.ndarray:
+    """(N,) bool: the ``samples`` whose (theta_h, theta_d) the ``keep`` pixels of
+    ``view`` look at under the true ``light`` (T, 3) (where the image shows the
+    material, :func:`~mi_dsbrdf.inference.lobes.observed_directions`)."""
+    rows = np.nonzero(np.asarray(keep).reshape(-1)[view.pixels])[0]
+    return observed_directions(view, light, rows)(samples.theta_h, samples.theta_d) > 0
+
+
+def _observed_errors(values, samples, where) -> dict:
+    """Eq. 20 (both conventions) of ``values`` on the observed samples (``where``)
+    and on the rest, and the observed share of the samples."""
+    out = {"observed_fraction": float(where.mean())}
+    for part, sel in (("observed", where), ("unobserved", ~where)):
+        for c in CONVENTIONS:
+            out["brdf_eq20_%s_%s" % (part, c)] = log_rmse_scale_invariant(
+                values[sel], samples.values[sel], samples.cos_i[sel], c)[0] if sel.any() else float("nan")
+    return out
+
+
+def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None, where=None) -> dict:
     """The do-nothing baseline's measures on this case: the model's mean material
-    (psi = 0) in Eq. 20 (both conventions) and relit, and a constant map against
-    ``truth_map`` (H, W, 3) on the ``seen`` texels (probes)."""
+    (psi = 0) in Eq. 20 (both conventions; also on the ``where`` samples and the
+    rest) and relit, and a constant map against ``truth_map`` (H, W, 3) on the
+    ``seen`` texels (probes)."""
     mean = model.mean_material()
     values = mean.eval(samples.theta_h, samples.theta_d)
     out = {"brdf_eq20_" + c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
            for c in CONVENTIONS}
+    if where is not None:
+        out.update(_observed_errors(values, samples, where))
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
     out["relight"], out["relight_psnr"], _ = relight(case, mean, merl, data)
     if truth_map is not None:
