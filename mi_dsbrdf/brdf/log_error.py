@@ -85,7 +85,12 @@ def material_errors(material, samples, scale_invariant=True, conventions=CONVENT
     e.g. :class:`~mi_dsbrdf.brdf.dsbrdf.Material`) against measured
     :class:`~mi_dsbrdf.model.samples.Samples`: ``{convention: error}``; with
     ``where`` ((N,) bool), on those samples only (NaN if none)."""
-    values = material.eval(samples.theta_h, samples.theta_d)
+    return values_errors(material.eval(samples.theta_h, samples.theta_d), samples, scale_invariant, conventions,
+                         where)
+
+
+def values_errors(values, samples, scale_invariant=True, conventions=CONVENTIONS, where=None) -> dict:
+    """:func:`material_errors` of BRDF ``values`` (N, 3) at the samples' angles."""
     measured, cos_i = samples.values, samples.cos_i
     if where is not None:
         where = np.asarray(where, bool).reshape(-1)

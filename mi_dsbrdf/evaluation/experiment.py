@@ -83,7 +83,7 @@ from mi_dsbrdf.config import NO_PRIORS, Config
 from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
                                           log_error_by_theta_d,
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
-                                          scale_invariant_log_error)
+                                          scale_invariant_log_error, values_errors)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import read_image
@@ -331,9 +331,7 @@ def _observed_errors(values, samples, where) -> dict:
     and on the rest, and the observed share of the samples."""
     out = {"observed_fraction": float(where.mean())}
     for part, sel in (("observed", where), ("unobserved", ~where)):
-        for c in CONVENTIONS:
-            out["brdf_eq20_%s_%s" % (part, c)] = log_rmse_scale_invariant(
-                values[sel], samples.values[sel], samples.cos_i[sel], c)[0] if sel.any() else float("nan")
+        out.update({"brdf_eq20_%s_%s" % (part, c): e for c, e in values_errors(values, samples, where=sel).items()})
     return out
 
 
