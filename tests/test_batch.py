@@ -146,16 +146,19 @@ def test_row_checks(folder, tmp_path):
             {"name": "fov", "image": "gold-metallic-paint.exr", "sphere": True, "fov": "200"},
             {"name": "light", "image": "gold-metallic-paint.exr", "sphere": "yes", "light": "sun"},
             # a sphere's outline is fitted in the checks: here its unlit side merges with the black background
-            {"name": "outline", "image": "gold-metallic-paint.exr", "sphere": "true", "light": "directional"}]
+            {"name": "outline", "image": "gold-metallic-paint.exr", "sphere": "true", "light": "directional"},
+            {"name": ".", "image": "gold-metallic-paint.exr", "scene": "scene.xml"},
+            {"name": "a/b", "image": "gold-metallic-paint.exr", "scene": "scene.xml"}]
     failures = {}
     got = list(recover_many(rows, tmp_path / "out", workers=1, base=folder, failures=failures))
-    assert [s for _, s, _ in got] == ["failed"] * 5
+    assert [s for _, s, _ in got] == ["failed"] * 7
+    assert "not . or .." in failures["."] and "no path separators" in failures["a/b"]
     assert "not both" in failures["both"] and "give a scene file" in failures["neither"]
     assert "fov 200" in failures["fov"] and "light 'sun'" in failures["light"]
     assert "outline is not a circle" in failures["outline"]
     assert all("\n" not in r for r in failures.values())
     with open(tmp_path / "out" / "summary.csv") as f:
-        assert [r["status"] for r in csv.DictReader(f)] == ["failed"] * 5
+        assert [r["status"] for r in csv.DictReader(f)] == ["failed"] * 7
 
 
 @pytest.mark.slow

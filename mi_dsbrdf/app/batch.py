@@ -167,7 +167,7 @@ def parse_row(fields: dict, base=".") -> Row:
     name = fields.get("name")
     name = os.path.splitext(os.path.basename(image))[0] if name is None else str(name)
     if name in (".", "..") or os.sep in name or (os.altsep and os.altsep in name):
-        raise InputError("name %r: give a folder name (no path separators)" % name)
+        raise InputError("name %r: give a folder name of its own (not . or .., no path separators)" % name)
     return Row(name=name, image=image, mask=mask, scene=scene, light=light or ("envmap" if sphere else None),
                fov=fov)
 
