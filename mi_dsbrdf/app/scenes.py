@@ -23,6 +23,7 @@ SCENES = {
     "sphere_directional": "sphere_directional.xml",
     "torus_envmap": "torus_envmap.xml",
     "sphere_point": "sphere_point.xml",
+    "sphere_on_ground": "sphere_on_ground.xml",
 }
 
 
