@@ -197,7 +197,7 @@ def test_a_dask_worker_with_several_threads_is_refused(folder, tmp_path):
 
 def test_a_spreadsheet_csv_with_a_bom_and_spaced_header_reads(tmp_path):
     """Excel's "CSV UTF-8" starts with a byte-order mark; hand-written headers have spaces."""
-    from mi_dsbrdf.app.batch import read_manifest
+    from mi_dsbrdf.app.manifest import read_manifest
     path = tmp_path / "m.csv"
     path.write_bytes(b"\xef\xbb\xbf image , scene , name \r\nphoto.exr , scene.xml , a\r\n")
     rows = read_manifest(path)
