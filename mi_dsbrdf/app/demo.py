@@ -141,6 +141,7 @@ def _run(out, material, res, config, spp) -> dict:
     log = result.log
     # 3. report
     truth = load_material(material)
+    samples = truth_samples(truth)
     found = load_material(os.path.join(rec, "material.json"))
     sky_truth = latlong_of(sunsky(SUN), *map_size)
     sky_found = result.illumination
@@ -158,12 +159,12 @@ def _run(out, material, res, config, spp) -> dict:
                  os.path.join(out, "comparison.png"))
     report = {"material": material, "image": [res, res], "map_size": list(map_size),
               "recover_seconds": log["seconds"], "total_seconds": time.perf_counter() - t0,
-              **{"brdf_eq20_%s" % c: e for c, e in brdf_errors(found, truth).items()},
+              **{"brdf_eq20_%s" % c: e for c, e in material_errors(found, samples).items()},
               **{"mean_material_eq20_%s" % c: e
-                 for c, e in brdf_errors(shipped_model().mean_material(), truth).items()},
+                 for c, e in material_errors(shipped_model().mean_material(), samples).items()},
               # where the image looked (Material.observed > 0), and the directions it did not show
               **{"brdf_eq20_%s_%s" % (part, c): e
-                 for part, errors in observed_errors(found, truth_samples(truth)).items() for c, e in errors.items()},
+                 for part, errors in observed_errors(found, samples).items() for c, e in errors.items()},
               **{"illumination_%s_after_scale" % c: scale_invariant_log_error(sky_found, sky_truth, seen, c)
                  for c in ("cosine", "paper")},
               **{"constant_map_%s_after_scale" % c: scale_invariant_log_error(np.ones_like(sky_truth), sky_truth,

@@ -110,6 +110,13 @@ def observed_errors(material, samples, conventions=CONVENTIONS) -> dict:
     seen = material.observed(samples.theta_h, samples.theta_d)
     if seen is None:
         return None
-    seen = seen > 0
-    return {"observed": material_errors(material, samples, conventions=conventions, where=seen),
-            "unobserved": material_errors(material, samples, conventions=conventions, where=~seen)}
+    return split_errors(material.eval(samples.theta_h, samples.theta_d), samples, seen > 0, conventions)
+
+
+def split_errors(values, samples, where, conventions=CONVENTIONS) -> dict:
+    """Eq. 20 of BRDF ``values`` (N, 3) on the samples ``where`` ((N,) bool) and on
+    the rest: ``{"observed": {convention: error}, "unobserved": {...}}`` (NaN where
+    there are none)."""
+    where = np.asarray(where, bool).reshape(-1)
+    return {"observed": values_errors(values, samples, conventions=conventions, where=where),
+            "unobserved": values_errors(values, samples, conventions=conventions, where=~where)}

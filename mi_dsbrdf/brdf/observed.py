@@ -33,6 +33,15 @@ def cell_indices(theta_h, theta_d, n=N_CELLS) -> tuple:
     return i, j
 
 
+def cell_sums(theta_h, theta_d, weight, n=N_CELLS) -> np.ndarray:
+    """(n, n) float64: the sum of the pairs' ``weight`` (clipped at 0) in each
+    (theta_h, theta_d) cell; angles in radians, all three of one shape. Sums of
+    several batches of pairs add up."""
+    i, j = cell_indices(np.ravel(theta_h), np.ravel(theta_d), n)
+    w = np.maximum(np.ravel(np.asarray(weight, dtype=np.float64)), 0.0)
+    return np.bincount(i * n + j, weights=w, minlength=n * n).reshape(n, n)
+
+
 class DirectionWeights:
     """The share of an image's light-weighted pixel x light pairs in each
     (theta_h, theta_d) cell (module doc).
@@ -55,9 +64,7 @@ class DirectionWeights:
     @classmethod
     def from_pairs(cls, theta_h, theta_d, weight, n=N_CELLS) -> "DirectionWeights":
         """From pairs' angles (radians) and their weights (any shape, the same)."""
-        i, j = cell_indices(np.ravel(theta_h), np.ravel(theta_d), n)
-        w = np.bincount(i * n + j, weights=np.ravel(np.asarray(weight, dtype=np.float64)), minlength=n * n)
-        return cls(np.maximum(w, 0.0).reshape(n, n))
+        return cls(cell_sums(theta_h, theta_d, weight, n))
 
     def __call__(self, theta_h, theta_d) -> np.ndarray:
         """The weight of each (theta_h, theta_d)'s cell (the shape of the angles)."""

@@ -83,7 +83,7 @@ from mi_dsbrdf.config import NO_PRIORS, Config
 from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
                                           log_error_by_theta_d,
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
-                                          scale_invariant_log_error, values_errors)
+                                          scale_invariant_log_error, split_errors)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import read_image
@@ -268,17 +268,16 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         if case.get("photons"):
             img = shot_noise(img, ts.mask, case["photons"], seed=case["id"])
         keep = usable_pixels(ts.mask, img)          # the app's pixels: the silhouette ring dropped
-        where = _observed(texels({"type": "dsbrdf"}, res, (H, W), shape=shape), downsample(truth, H, W), keep,
-                          samples)
+        view = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)     # what inference sees
+        where = _observed(view, downsample(truth, H, W), keep, samples)
         if method == "mean-constant":
             # doing nothing: the model's mean material (psi = 0) under a constant map
             out["seconds"] = 0.0
             material, rows, seen, recovered_map = model.mean_material(), [], np.ones((H, W), bool), np.ones((H, W, 3))
             values = material.eval(samples.theta_h, samples.theta_d)
         elif method == "dsbrdf":
-            ts = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)
             starts = None if case.get("start") is None else [reflectance_starts(model)[case["start"]]]
-            result = recover_envmap(ts, img, keep, model, cfg, starts=starts)
+            result = recover_envmap(view, img, keep, model, cfg, starts=starts)
             out["seconds"] = time.perf_counter() - t0
             out["terms"] = {k: float(v) for k, v in result.log[-1].items()
                             if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
@@ -329,10 +328,9 @@ def _observed(view, light, keep, samples) -> np.ndarray:
 def _observed_errors(values, samples, where) -> dict:
     """Eq. 20 (both conventions) of ``values`` on the observed samples (``where``)
     and on the rest, and the observed share of the samples."""
-    out = {"observed_fraction": float(where.mean())}
-    for part, sel in (("observed", where), ("unobserved", ~where)):
-        out.update({"brdf_eq20_%s_%s" % (part, c): e for c, e in values_errors(values, samples, where=sel).items()})
-    return out
+    return {"observed_fraction": float(where.mean()),
+            **{"brdf_eq20_%s_%s" % (part, c): e
+               for part, errors in split_errors(values, samples, where).items() for c, e in errors.items()}}
 
 
 def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None, where=None) -> dict:

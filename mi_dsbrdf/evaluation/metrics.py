@@ -5,7 +5,7 @@ conventions) live in :mod:`mi_dsbrdf.brdf.log_error`, where the model's fits
 use them; they are re-exported here beside the measures of a recovery:
 
 * :func:`log_rmse`, :func:`log_rmse_scale_invariant`, :func:`material_errors`,
-  :func:`values_errors`, :func:`observed_errors` (Eq. 20 where the image looked, and elsewhere),
+  :func:`values_errors`, :func:`split_errors`, :func:`observed_errors` (Eq. 20 where the image looked, and elsewhere),
   :func:`log_brdf`, :data:`PAPER_FLOOR`, :data:`CONVENTIONS` (see
   :mod:`mi_dsbrdf.brdf.log_error`);
 * :func:`log_error_by_theta_d` — where in theta_d Eq. 20 (paper) lies;
@@ -29,7 +29,7 @@ from mi_dsbrdf.brdf.angles import from_half_diff
 from mi_dsbrdf.brdf.dsbrdf import highlight_ratio  # noqa: F401 (one of this module's measures)
 from mi_dsbrdf.brdf.log_error import (CONVENTIONS, PAPER_FLOOR, log_brdf, log_rmse,  # noqa: F401 (re-exported)
                                       log_rmse_scale_invariant, material_errors, observed_errors,
-                                      values_errors)
+                                      split_errors, values_errors)
 
 
 #: theta_d bands (degrees) of :func:`log_error_by_theta_d`: the last holds the

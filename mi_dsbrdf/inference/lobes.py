@@ -33,7 +33,7 @@ import numpy as np
 
 from mi_dsbrdf.brdf.curves import N_CONTROL, spline_basis
 from mi_dsbrdf.brdf.dsbrdf import LOG_COS_H_MIN, lobe_curves, lobe_rgb, lobe_value
-from mi_dsbrdf.brdf.observed import N_CELLS, DirectionWeights, cell_indices
+from mi_dsbrdf.brdf.observed import N_CELLS, DirectionWeights, cell_sums
 from mi_dsbrdf.inference.forward import TexelSum, apply_transport, unit_scaled
 
 #: pairs per kernel launch: the transport writes 3 floats a pair (a 128x128 sphere
@@ -189,17 +189,15 @@ def observed_directions(texels: TexelSum, illumination, rows, chunk=JACOBIAN_CHU
     weighted by cos theta_o * solid angle * visibility * the grey level (channel
     mean) of its texel's light. Pixels in chunks of at most ``chunk`` pairs (each
     pair's geometry is held in float32 and float64 once: 36 bytes)."""
-    n = N_CELLS
     grey = np.asarray(illumination, dtype=np.float64).reshape(-1, 3).mean(axis=1)
     nd = texels.n_directions
     light = grey[np.arange(nd) // texels.per_texel]           # (directions,): the light each one carries
     rows = np.asarray(rows, dtype=np.int64)
     step = max(1, chunk // max(nd, 1))
-    total = np.zeros(n * n)
+    total = np.zeros((N_CELLS, N_CELLS))
     for r0 in range(0, rows.size, step):
         log_cos, theta_d, weight = (a.numpy().astype(np.float64)
                                     for a in LobeSum(texels.subset(rows[r0:r0 + step])).geometry)
         theta_h = np.arccos(np.clip(np.exp(log_cos), 0.0, 1.0))
-        i, j = cell_indices(theta_h, theta_d, n)
-        total += np.bincount(i * n + j, weights=(weight.reshape(-1, nd) * light).ravel(), minlength=n * n)
-    return DirectionWeights(np.maximum(total, 0.0).reshape(n, n))
+        total += cell_sums(theta_h, theta_d, weight.reshape(-1, nd) * light)
+    return DirectionWeights(total)
