@@ -24,7 +24,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.inference.forward import centre_hits
-from mi_dsbrdf.inference.lobes import LobeSum
+from mi_dsbrdf.inference.lobes import LobeSum, pixel_ranges
 from mi_dsbrdf.inference.pixels import usable_pixels
 
 #: film pixels whose rays are traced at once when the full-size object mask is found
@@ -228,13 +228,12 @@ def render_chunks(lit, material, illumination, pairs) -> np.ndarray:
     of the view ``lit`` (a TexelSum) under ``illumination`` (T, 3), at most ``pairs``
     pixel-direction pairs at a time: each pixel's pairs are the numbers of one call
     over all pixels, their float32 sum over texels (BLAS) the same to rounding."""
-    step = max(1, int(pairs) // max(lit.n_directions, 1))
-    if step >= lit.n_pixels:
+    ranges = pixel_ranges(lit.n_pixels, lit.n_directions, pairs)
+    if len(ranges) == 1:
         return LobeSum(lit).render(material, illumination)
     out = np.empty((lit.n_pixels, 3))
-    for p0 in range(0, lit.n_pixels, step):
-        rows = np.arange(p0, min(p0 + step, lit.n_pixels))
-        out[rows] = LobeSum(lit.subset(rows)).render(material, illumination)
+    for p0, p1 in ranges:
+        out[p0:p1] = LobeSum(lit.subset(np.arange(p0, p1))).render(material, illumination)
     return out
 
 

@@ -183,6 +183,13 @@ class LobeSum:
         return LobeJacobian(image, d_ctrl, d_chroma)
 
 
+def pixel_ranges(n_pixels, n_directions, pairs) -> list:
+    """[(p0, p1), ...]: ``n_pixels`` pixels in ranges of at most ``pairs``
+    pixel-direction pairs (one pixel at least), each pixel with ``n_directions``."""
+    step = max(1, int(pairs) // max(int(n_directions), 1))
+    return [(p0, min(p0 + step, n_pixels)) for p0 in range(0, n_pixels, step)]
+
+
 def observed_directions(texels: TexelSum, illumination, rows, chunk=JACOBIAN_CHUNK) -> DirectionWeights:
     """Where the pixels ``texels.pixels[rows]`` look in (theta_h, theta_d) under
     ``illumination`` (T, 3): every pair's cell (:mod:`~mi_dsbrdf.brdf.observed`)
@@ -193,11 +200,10 @@ def observed_directions(texels: TexelSum, illumination, rows, chunk=JACOBIAN_CHU
     nd = texels.n_directions
     light = grey[np.arange(nd) // texels.per_texel]           # (directions,): the light each one carries
     rows = np.asarray(rows, dtype=np.int64)
-    step = max(1, chunk // max(nd, 1))
     total = np.zeros((N_CELLS, N_CELLS))
-    for r0 in range(0, rows.size, step):
+    for r0, r1 in pixel_ranges(rows.size, nd, chunk):
         log_cos, theta_d, weight = (a.numpy().astype(np.float64)
-                                    for a in LobeSum(texels.subset(rows[r0:r0 + step])).geometry)
+                                    for a in LobeSum(texels.subset(rows[r0:r1])).geometry)
         theta_h = np.arccos(np.clip(np.exp(log_cos), 0.0, 1.0))
         total += cell_sums(theta_h, theta_d, weight.reshape(-1, nd) * light)
     return DirectionWeights(total)
