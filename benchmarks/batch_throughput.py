@@ -17,7 +17,8 @@ a process of its own, as a user runs it:
 
 It prints each run's wall time and throughput (rows a minute), the ratios to one
 worker (target: two workers >= 1.8x; the LocalCluster within 10 % of two
-workers), the rows each run recovered and failed (target: 37 and 3, exit code
+workers) and the ceiling on that ratio, the machine's cores over those one
+worker keeps busy (CPU time / wall time), the rows each run recovered and failed (target: 37 and 3, exit code
 1), and for the rerun the rows recomputed that were complete before it (target:
 none). Needs ../shared/data.
 
@@ -30,6 +31,7 @@ import csv
 import json
 import os
 import platform
+import resource
 import shutil
 import signal
 import subprocess
@@ -108,17 +110,27 @@ def _complete(out) -> dict:
 
 
 def timed_run(manifest, out, preset, extra) -> dict:
-    """One batch from an empty ``out``: wall time, exit code, rows done and failed."""
+    """One batch from an empty ``out``: wall time, exit code, rows done and failed, and
+    the cores its processes kept busy on average (CPU time / wall time)."""
     shutil.rmtree(out, ignore_errors=True)
+    cpu0 = _children_cpu()
     t0 = time.perf_counter()
     proc = subprocess.run(_command(manifest, out, preset, extra), stdout=subprocess.DEVNULL,
                           stderr=subprocess.PIPE, text=True)
     seconds = time.perf_counter() - t0
+    busy = (_children_cpu() - cpu0) / seconds
     status = _statuses(out)
     done = sum(s == "done" for s in status.values())
     return {"seconds": seconds, "exit_code": proc.returncode, "done": done,
             "failed": sum(s == "failed" for s in status.values()), "rows_per_minute": 60.0 * done / seconds,
+            "busy_cores": busy,
             "failure_lines": [line for line in proc.stderr.splitlines() if line.startswith("  broken")]}
+
+
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of this process's finished children and theirs."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def interrupted_run(manifest, out, preset) -> dict:
@@ -164,17 +176,21 @@ def main(argv=None):
     runs = {}
     for name, extra in (("one_worker", ["--workers", "1"]), ("two_workers", ["--workers", "2"])):
         runs[name] = timed_run(manifest, os.path.join(work, name), args.preset, extra)
-        print("%-12s %6.0f s  %5.2f rows/min  %d done, %d failed, exit %d" % (
+        print("%-12s %6.0f s  %5.2f rows/min  %d done, %d failed, exit %d, %.2f cores busy" % (
             name, runs[name]["seconds"], runs[name]["rows_per_minute"], runs[name]["done"], runs[name]["failed"],
-            runs[name]["exit_code"]), flush=True)
+            runs[name]["exit_code"], runs[name]["busy_cores"]), flush=True)
     runs["local_cluster"] = r = _cluster_run(manifest, os.path.join(work, "local_cluster"), args.preset)
     print("%-12s %6.0f s  %5.2f rows/min  %d done, %d failed, exit %d" % (
         "LocalCluster", r["seconds"], r["rows_per_minute"], r["done"], r["failed"], r["exit_code"]), flush=True)
     resume = interrupted_run(manifest, os.path.join(work, "interrupted"), args.preset)
     two = runs["two_workers"]["rows_per_minute"] / runs["one_worker"]["rows_per_minute"]
     gap = runs["local_cluster"]["rows_per_minute"] / runs["two_workers"]["rows_per_minute"] - 1.0
-    print("two workers / one: %.2fx (target >= %g); LocalCluster / two workers: %+.0f %% (target within %.0f %%)"
-          % (two, MIN_TWO_WORKERS, 100 * gap, 100 * MAX_CLUSTER_GAP))
+    # one worker keeping b cores busy leaves at most cores / b to gain from more workers
+    ceiling = os.cpu_count() / runs["one_worker"]["busy_cores"]
+    print("two workers / one: %.2fx (target >= %g; at most %.2fx on %d cores, as one worker keeps %.2f busy); "
+          "LocalCluster / two workers: %+.0f %% (target within %.0f %%)"
+          % (two, MIN_TWO_WORKERS, ceiling, os.cpu_count(), runs["one_worker"]["busy_cores"], 100 * gap,
+             100 * MAX_CLUSTER_GAP))
     print("broken rows, one line each: %s" % " | ".join(runs["two_workers"]["failure_lines"]))
     print("interrupted with %d of %d rows complete (exit %d, staging folders left: %d); the rerun: %d complete, "
           "%d of them recomputed, exit %d" % (
@@ -184,6 +200,7 @@ def main(argv=None):
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump({"runs": runs, "interrupted": resume, "two_workers_ratio": two, "cluster_gap": gap,
+                   "two_workers_ceiling": ceiling,
                    "targets": {"two_workers_ratio": MIN_TWO_WORKERS, "cluster_gap": MAX_CLUSTER_GAP},
                    "rows": {"good": GOOD, "broken": 3, "res": RES, "preset": args.preset},
                    "machine": "%s, %d cores" % (platform.machine(), os.cpu_count()),
