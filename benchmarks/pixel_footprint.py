@@ -10,14 +10,19 @@ DSBRDF under a 32x64 map, Mitsuba's render (4096 spp, the map written as
 
 * the forward model at 1, 2 and 8 directions per texel side (centre rays);
 * the forward model at 2 directions per texel side, traced at ``k`` times the
-  resolution and averaged over each pixel's k x k block (the pixel's area).
+  resolution and averaged over each pixel's k x k block (the pixel's area);
+* the forward model at 2 directions per texel side with the highlight pairs of
+  25 texels a pixel (:mod:`mi_dsbrdf.inference.highlights`, ``--highlight-texels 25``).
 
-Relative L1 over the pixels on the sphere, for the library material
+Relative L1 over the pixels inference would use (the sphere without its
+silhouette ring, :func:`~mi_dsbrdf.inference.pixels.interior`), beside the
+noise of Mitsuba's render itself (half the relative L1 between two seeds), for
+the library material
 gold-metallic-paint and for the same with every lobe's gamma set to 4700 (a
 sharp lobe, about 2.4 degrees wide in reflected direction), under the procedural
 sky and, with ../shared/data, the grace probe.
 
-    .venv/bin/python benchmarks/pixel_footprint.py        # ~3 min
+    .venv/bin/python benchmarks/pixel_footprint.py        # ~6 min
 
 Writes benchmarks/results/pixel_footprint.json.
 """
@@ -31,6 +36,8 @@ from mi_dsbrdf.evaluation.benchmark_cases import DATA, RESULTS, have_data
 
 H, W = 32, 64
 SAMPLES, SPP = (1, 2, 8), 4096
+#: the highlight pairs measured (``Config.highlight_texels``)
+HIGHLIGHT_TEXELS = 25
 
 
 def relative_l1(a, b, mask) -> float:
@@ -42,20 +49,25 @@ def case(material, light, res, k) -> dict:
 
     from mi_dsbrdf.app.result import texel_blocks
     from mi_dsbrdf.evaluation.experiment import dsbrdf_bsdf, render, texels
+    from mi_dsbrdf.inference.pixels import interior
     from mi_dsbrdf.inference.scene_dicts import camera
     bsdf = dsbrdf_bsdf(material)
     scene = {"type": "scene", "integrator": {"type": "direct", "hide_emitters": True}, "sensor": camera(res),
              "object": {"type": "sphere", "bsdf": bsdf},
              "sky": {"type": "envmap", "bitmap": mi.Bitmap(texel_blocks(light))}}
-    mitsuba = np.array(mi.render(mi.load_dict(scene), spp=SPP, seed=3), dtype=np.float64)
-    mask = texels({"type": "dsbrdf"}, res, (H, W)).mask
-    out = {}
+    loaded = mi.load_dict(scene)
+    seeds = [np.array(mi.render(loaded, spp=SPP, seed=s), dtype=np.float64) for s in (3, 4)]
+    mitsuba = 0.5 * (seeds[0] + seeds[1])
+    mask = interior(texels({"type": "dsbrdf"}, res, (H, W)).mask)
+    out = {"mitsuba_noise": relative_l1(seeds[0], seeds[1], mask) / 2}
     for s in SAMPLES:
         ts = texels({"type": "dsbrdf"}, res, (H, W), samples=s).with_bsdf(bsdf)
         out["centre_rays_samples_%d" % s] = relative_l1(render(ts, light.reshape(-1, 3)), mitsuba, mask)
     ts = texels({"type": "dsbrdf"}, res * k, (H, W), samples=2).with_bsdf(bsdf)
     area = render(ts, light.reshape(-1, 3)).reshape(res, k, res, k, 3).mean(axis=(1, 3))
     out["pixel_area_samples_2"] = relative_l1(area, mitsuba, mask)
+    ts = texels({"type": "dsbrdf"}, res, (H, W)).with_map_size((H, W), 2, HIGHLIGHT_TEXELS).with_bsdf(bsdf)
+    out["highlight_pairs_samples_2"] = relative_l1(render(ts, light.reshape(-1, 3)), mitsuba, mask)
     return out
 
 
@@ -83,10 +95,11 @@ def main(argv=None):
             for lname, light in lights.items():
                 r = case(material, light, res, k)
                 results["%d px, %s, %s" % (res, mname, lname)] = r
-                print("%3d px  %-20s %-6s  centre rays: %s   pixel area (%dx%d rays): %5.1f %%" % (
-                    res, mname, lname, "  ".join("%d dirs %5.1f %%" % (s, 100 * r["centre_rays_samples_%d" % s])
-                                                 for s in SAMPLES), k, k, 100 * r["pixel_area_samples_2"]),
-                      flush=True)
+                centre = "  ".join("%d dirs %5.1f %%" % (s, 100 * r["centre_rays_samples_%d" % s]) for s in SAMPLES)
+                print("%3d px  %-20s %-6s  Mitsuba noise %4.1f %%  centre rays: %s   pixel area (%dx%d rays): %5.1f %%"
+                      "   highlight pairs: %5.1f %%" % (res, mname, lname, 100 * r["mitsuba_noise"], centre, k, k,
+                                                        100 * r["pixel_area_samples_2"],
+                                                        100 * r["highlight_pairs_samples_2"]), flush=True)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, "w") as f:
         json.dump({"cases": results, "map": [H, W], "mitsuba_spp": SPP,

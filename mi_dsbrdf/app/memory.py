@@ -13,6 +13,7 @@ from mi_dsbrdf.app.working_grid import WorkingGrid
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import ConfigError
 from mi_dsbrdf.inference.envmap import map_sizes
+from mi_dsbrdf.inference.highlights import PIXEL_SIDE, TEXEL_SIDE
 from mi_dsbrdf.inference.objective import MAX_REFLECTANCE_PIXELS, MIN_REFLECTANCE_PIXELS
 from mi_dsbrdf.inference.scene_needs import dsbrdf_object, light_kind, needs_visibility
 
@@ -83,6 +84,9 @@ def memory_estimate(cfg: Config, grid: WorkingGrid, envmap=True, visibility=Fals
             directions += DIRECTION_BYTES * d
             vis += (pixels + post) * d if visibility else 0
         views += JACOBIAN_BYTES * lanes + TRANSPORT_BYTES * post * T
+        # the colour view's highlight pairs: their lanes' geometry, as a pair's
+        refl = min(post, int(np.clip(cfg.reflectance_pairs // T, MIN_REFLECTANCE_PIXELS, MAX_REFLECTANCE_PIXELS)))
+        views += PAIR_BYTES * (post + refl) * cfg.highlight_texels * (PIXEL_SIDE * TEXEL_SIDE) ** 2
     else:
         views = (PAIR_BYTES + TRANSPORT_BYTES) * pixels + JACOBIAN_BYTES * min(pixels, MAX_REFLECTANCE_PIXELS)
         vis = 2 * pixels if visibility else 0

@@ -23,7 +23,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.inference.forward import centre_hits
+from mi_dsbrdf.inference.rays import centre_hits
 from mi_dsbrdf.inference.lobes import LobeSum, pixel_ranges
 from mi_dsbrdf.inference.pixels import usable_pixels
 

@@ -51,6 +51,19 @@ def log_cos_h(cos_h, sin2_h):
                     o.log(o.fmax(o.select(near, 1.0, cos_h), 1e-30)))
 
 
+def pair_geometry(frame, wi, d, omega) -> tuple:
+    """What an isotropic BRDF sees of a light direction: (log cos theta_h, theta_d,
+    weight) of the direction ``d`` (three world components) at the shading frame
+    ``frame`` (its s, t and n axes, three components each) with ``wi`` (local) the
+    direction to the camera; the weight cos theta_o * ``omega`` (solid angle), zero
+    unless both directions are above the surface."""
+    o = ops(*wi, *d)
+    wo = [sum(a * b for a, b in zip(axis, d)) for axis in frame]          # to the local frame
+    cos_h, cos_d, sin2_h = cos_half_diff(wi, wo)
+    weight = o.select((wi[2] > 0) & (wo[2] > 0), wo[2] * omega, 0.0)
+    return log_cos_h(cos_h, sin2_h), o.acos(cos_d), weight
+
+
 def half_diff(wi, wo):
     """Rusinkiewicz angles (theta_h, phi_h, theta_d, phi_d) of direction pairs.
 

@@ -110,18 +110,19 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     max_pixels = cfg.map_pairs // (cfg.map_size[0] * cfg.map_size[1])
 
     def posterior(size, pass_name):
-        samples, pass_cfg = cfg.texel_samples, cfg
+        samples, highlights, pass_cfg = cfg.texel_samples, cfg.highlight_texels, cfg
         if pass_name in ("start", "grey"):
+            highlights = 0
             if cfg.grey_texel_samples is not None:
                 samples = cfg.grey_texel_samples
             # the start and the grey pass hold the lobes at the image's colour and the
             # map grey: the colour-split priors are constants there, and left out (a
             # constant would move Levenberg-Marquardt's relative stopping test)
             pass_cfg = cfg.with_colour_split(False)
-        key = (size, samples, pass_cfg)
+        key = (size, samples, highlights, pass_cfg)
         if key not in posteriors:
-            posteriors[key] = Posterior(texels.with_map_size(size, samples), observed, mask, model, pass_cfg,
-                                        max_pixels=max_pixels)
+            posteriors[key] = Posterior(texels.with_map_size(size, samples, highlights), observed, mask, model,
+                                        pass_cfg, max_pixels=max_pixels)
         return posteriors[key]
 
     rows = []

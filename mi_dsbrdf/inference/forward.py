@@ -15,7 +15,11 @@ With ``samples`` s > 1 each texel is lit from s x s directions of its
 footprint, each with its share of the solid angle (the sum over t then runs
 over them, L_t shared): the map as a piecewise-constant function of direction,
 as a camera sees it. From the texel centres alone a lobe narrower than the
-texel spacing sparkles where the image is smooth. Unlike Monte Carlo rendering
+texel spacing sparkles where the image is smooth. A lobe narrower than the
+directions one pixel reflects needs the pixel's area too: the highlight pairs
+(:mod:`~mi_dsbrdf.inference.highlights`) take each pixel's texels nearest its
+mirror direction out of the sum and integrate them over the pixel's area and
+the texel. Unlike Monte Carlo rendering
 this is noise-free, so gradients are exact and the optimiser can use line
 searches.
 Geometry comes from Mitsuba (one ray through each pixel centre); the BSDF is
@@ -33,25 +37,13 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.brdf.angles import cos_half_diff, log_cos_h
-from mi_dsbrdf.inference.latlong import latlong_directions, texel_solid_angles
+from mi_dsbrdf.brdf.angles import pair_geometry
+from mi_dsbrdf.inference.highlights import TEXEL_SIDE, HighlightPairs
+from mi_dsbrdf.inference.latlong import latlong_directions, texel_directions
+from mi_dsbrdf.inference.rays import centre_hits
 
 #: Pixel-texel pairs evaluated per Dr.Jit launch (memory / speed trade-off).
 CHUNK = 1 << 22
-
-
-def centre_hits(scene, sensor, shape) -> tuple:
-    """(the SurfaceInteraction of the ray through each pixel centre of ``sensor``'s
-    film, row by row; (H * W,) bool: the pixels whose centre ray sees ``shape``)."""
-    w, h = (int(v) for v in sensor.film().crop_size())
-    ys, xs = np.mgrid[0:h, 0:w]
-    uv = mi.Point2f(((xs.reshape(-1) + 0.5) / w).astype(np.float32),
-                    ((ys.reshape(-1) + 0.5) / h).astype(np.float32))
-    rays, _ = sensor.sample_ray(0.0, 0.5, uv, mi.Point2f(0.5, 0.5))
-    si = scene.ray_intersect(rays)
-    hit = np.array(si.is_valid()) & (np.array(dr.reinterpret_array(mi.UInt32, si.shape)) ==
-                                     np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))
-    return si, hit
 
 
 class TexelSum:
@@ -65,9 +57,11 @@ class TexelSum:
     visibility : trace shadow rays through ``scene`` (a non-convex object, other shapes)
     to_world : 4x4 matrix of the envmap's to_world (default identity)
     samples : directions per texel side (s x s per texel, module doc)
+    highlights : how many texels nearest each pixel's mirror direction are integrated
+        over the pixel's area and the texel (:mod:`~mi_dsbrdf.inference.highlights`; 0: none)
     """
 
-    def __init__(self, scene, shape, map_size, visibility=False, to_world=None, samples=1):
+    def __init__(self, scene, shape, map_size, visibility=False, to_world=None, samples=1, highlights=0):
         sensor = scene.sensors()[0]
         w, h = (int(v) for v in sensor.film().crop_size())
         self.image_size = (h, w)
@@ -82,32 +76,39 @@ class TexelSum:
                                                                     self.si.sh_frame.n, self.si.wi))
         self.positions = np.array(self.si.p, dtype=np.float64)
         self.bsdf = shape.bsdf()
-        self._scene, self._trace = scene, visibility
+        self._scene, self._sensor, self._shape, self._trace = scene, sensor, shape, visibility
         self._to_world = None if to_world is None else np.asarray(to_world, dtype=np.float64)[:3, :3]
-        self._map(map_size, samples)
+        self._map(map_size, samples, highlights)
 
-    def _map(self, map_size, samples=1):
+    def _world(self, d) -> np.ndarray:
+        """Map-frame directions (N, 3) in world space (the envmap's to_world)."""
+        if self._to_world is None:
+            return d
+        d = d @ self._to_world.T
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def _map(self, map_size, samples=1, highlights=0):
         H, W = (int(v) for v in map_size)
         s = int(samples)
         if s < 1:
             raise ValueError("samples per texel side must be >= 1, got %r" % (samples,))
         self.map_size = (H, W)
-        # the (H s) x (W s) grid's directions, ordered texel by texel (the s x s
-        # directions of a texel contiguous), each its share of the solid angle
-        d = latlong_directions(H * s, W * s).reshape(H, s, W, s, 3).transpose(0, 2, 1, 3, 4).reshape(-1, 3)
-        omega = texel_solid_angles(H * s, W * s).reshape(H, s, W, s).transpose(0, 2, 1, 3).reshape(-1)
-        if self._to_world is not None:
-            d = d @ self._to_world.T
-            d /= np.linalg.norm(d, axis=1, keepdims=True)
-        self._light(d, omega, None, s * s)
+        d, omega = texel_directions(H, W, s)
+        self._light(self._world(d), omega, None, s * s)
+        if highlights:
+            fine, fine_omega = texel_directions(H, W, TEXEL_SIDE)
+            self.highlights = HighlightPairs.build(self._scene, self._sensor, self._shape, self.pixels, self.si,
+                                                   self._world(latlong_directions(H, W).reshape(-1, 3)),
+                                                   self._world(fine), fine_omega, self._trace, nearest=highlights)
 
     # A TexelSum is never changed once made: a new light, BSDF or pixel subset
     # is a new (shallow) copy that shares the geometry.
-    def with_map_size(self, map_size, samples=1) -> "TexelSum":
+    def with_map_size(self, map_size, samples=1, highlights=0) -> "TexelSum":
         """This view under an illumination map of ``map_size`` (H, W) texels, each
-        lit from ``samples`` x ``samples`` directions (module doc)."""
+        lit from ``samples`` x ``samples`` directions (module doc), with the highlight
+        pairs of ``highlights`` texels a pixel (class doc; 0: none)."""
         out = copy.copy(self)
-        out._map(map_size, samples)
+        out._map(map_size, samples, highlights)
         return out
 
     def with_directions(self, directions, solid_angles) -> "TexelSum":
@@ -140,6 +141,7 @@ class TexelSum:
     def _light(self, directions, solid_angles, position, per_texel=1):
         self.directions, self.solid_angles, self.light_position = directions, solid_angles, position
         self.per_texel = per_texel          # consecutive directions that share one texel's radiance
+        self.highlights = None              # a map's (_map) or none
         self.visibility = self._trace_visibility(self._scene) if self._trace else None
 
     def subset(self, rows) -> "TexelSum":
@@ -155,6 +157,8 @@ class TexelSum:
         sub.visibility = None if self.visibility is None else self.visibility[rows]
         if self.light_position is not None:
             sub.directions, sub.solid_angles = self.directions[rows], self.solid_angles[rows]
+        if self.highlights is not None:
+            sub.highlights = self.highlights.subset(rows)
         return sub
 
     @property
@@ -245,6 +249,10 @@ class TexelSum:
         if self.visibility is not None:
             v = mi.Bool(self.visibility[:, t0:t1].reshape(-1))
             f = dr.select(v, f, 0.0)
+        if self.highlights is not None:               # those pairs are the highlights' (class doc)
+            out = np.zeros(self.n_pixels * (t1 - t0), bool)
+            out[self.highlights.excluded(self.per_texel, t0, t1)] = True
+            f = dr.select(mi.Bool(out), 0.0, f)
         return f
 
     def transport(self) -> np.ndarray:
@@ -258,6 +266,9 @@ class TexelSum:
                 f = self._weights(si, wo, pix, tex, t0, t1)
                 for c in range(3):
                     out[c, :, t0 // k:t1 // k] = self.texel_sums(f[c], self.n_pixels)
+            if self.highlights is not None:
+                h = dr.block_sum(self.highlights.plugin_weights(self.bsdf), self.highlights.per_pair)
+                self.highlights.add_to(out, np.array(h).reshape(3, self.n_pixels, -1))
         return out
 
     def pair_geometry(self) -> tuple:
@@ -280,13 +291,13 @@ class TexelSum:
             return [dr.gather(mi.Float, buf, index + (first + k) * width) for k in range(count)]
         s_, t_, n_, wi = (rows(3 * i, 3, pix, P) for i in range(4))
         d = [dr.gather(mi.Float, buf, per_light + 12 * P + k * n_light) for k in range(3)]
-        wo = [sum(a * b for a, b in zip(axis, d)) for axis in (s_, t_, n_)]       # to the local frame
-        cos_h, cos_d, sin2_h = cos_half_diff(wi, wo)
         omega = dr.gather(mi.Float, buf, per_light + 12 * P + 3 * n_light)
-        weight = dr.select((wi[2] > 0) & (wo[2] > 0), wo[2] * omega, 0.0)
+        log_cos, theta_d, weight = pair_geometry((s_, t_, n_), wi, d, omega)
         if self.visibility is not None:
             weight = dr.select(mi.Bool(self.visibility.reshape(-1)), weight, 0.0)
-        out = (log_cos_h(cos_h, sin2_h), dr.safe_acos(cos_d), weight)
+        if self.highlights is not None:               # those pairs are the highlights' (class doc)
+            dr.scatter(weight, 0.0, mi.UInt32(self.highlights.excluded(self.per_texel, 0, nt).astype(np.uint32)))
+        out = (log_cos, theta_d, weight)
         dr.eval(*out)
         return out
 
@@ -297,12 +308,17 @@ class TexelSum:
     def _radiance_chunks(self, illumination):
         """Yield (P,) Color3f radiance from each chunk of texels under
         ``illumination`` (T, 3), with whatever AD graph the BSDF parameters carry."""
-        L = np.repeat(np.asarray(illumination, dtype=np.float32).reshape(-1, 3), self.per_texel, axis=0)
-        Lr = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
+        L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
+        Lt = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
         for t0, t1 in self._chunks():
             si, wo, pix, tex = self._pairs(t0, t1)
-            f = self._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lr, tex)
+            f = self._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lt, tex // self.per_texel)
             yield dr.block_sum(f, t1 - t0)                   # (P,) radiance from these texels
+        if self.highlights is not None:
+            h = self.highlights
+            _, direction = h.lanes()
+            f = h.plugin_weights(self.bsdf) * dr.gather(mi.Color3f, Lt, direction // h.texel_side ** 2)
+            yield dr.block_sum(f, h.texels.shape[1] * h.per_pair)
 
     def reflectance_jacobian(self, illumination, params, keys):
         """Pixel radiance (P, 3) and its Jacobian (P, 3, n) with respect to the BSDF

@@ -31,6 +31,16 @@ def texel_solid_angles(height: int, width: int) -> np.ndarray:
     return np.repeat(((edges[:-1] - edges[1:]) * 2 * math.pi / width)[:, None], width, axis=1)
 
 
+def texel_directions(height: int, width: int, side: int) -> tuple:
+    """The directions of the (height s) x (width s) grid, ordered texel by texel
+    (the s x s directions inside a texel contiguous, row by row), and each one's
+    solid angle (its share of its texel's): ((H W s^2, 3), (H W s^2,)) float64."""
+    s = int(side)
+    d = latlong_directions(height * s, width * s).reshape(height, s, width, s, 3).transpose(0, 2, 1, 3, 4)
+    omega = texel_solid_angles(height * s, width * s).reshape(height, s, width, s).transpose(0, 2, 1, 3)
+    return d.reshape(-1, 3), omega.reshape(-1)
+
+
 def direction_to_uv(d) -> np.ndarray:
     """(N, 2) lat-long coordinates in [0, 1) of world directions (N, 3)."""
     d = np.asarray(d, dtype=np.float64).reshape(-1, 3)

@@ -77,12 +77,25 @@ class LobeSum:
         return self.texels.pair_geometry()
 
     @functools.cached_property
+    def highlight_geometry(self) -> tuple:
+        """(log cos theta_h, theta_d, weight) of the highlight pairs' lanes
+        (:meth:`HighlightPairs.geometry <mi_dsbrdf.inference.highlights.HighlightPairs.geometry>`),
+        or None without them."""
+        h = self.texels.highlights
+        return None if h is None else h.geometry()
+
+    @functools.cached_property
     def unseen(self) -> np.ndarray:
         """(T,) bool: texels no observed pixel can receive light from, whatever the
         material: below every pixel's horizon, or blocked. (A test on the transport
         instead, relative to its largest entry, hid most of a map behind one sharp
         lobe's peak.)"""
-        return ~(self.texels.texel_sums(self.geometry[2], self.n_pixels) > 0).any(axis=0)   # weights >= 0
+        seen = (self.texels.texel_sums(self.geometry[2], self.n_pixels) > 0).any(axis=0)   # weights >= 0
+        h = self.texels.highlights
+        if h is not None:
+            lit = dr.block_sum(self.highlight_geometry[2], h.per_pair).numpy() > 0
+            seen[h.texels.reshape(-1)[lit]] = True
+        return ~seen
 
     def subset(self, rows) -> "LobeSum":
         """The same view restricted to the pixels ``texels.pixels[rows]``."""
@@ -125,6 +138,29 @@ class LobeSum:
             return [[dr.gather(mi.Float, buf, first + r * width + j) for j in range(width)] for r in range(R)]
         return scalars(0, N_CONTROL), scalars(R * N_CONTROL, N_CONTROL), scalars(2 * R * N_CONTROL, 3)
 
+    def _highlight_sums(self, terms, n_terms, chunk):
+        """Yield pixel ranges [p0, p1) of at most ``chunk`` highlight pairs and, for
+        each of their pairs, the sums over its lanes of ``terms(lc, td, w)`` (a list
+        of ``n_terms`` Dr.Jit Floats), as (n_terms, p1 - p0, K) float32. The lanes
+        are summed in a Dr.Jit loop: none is stored (a stored lane of 39 Jacobian
+        columns made the pairs 8 times the cost of the texel sum's)."""
+        h = self.texels.highlights
+        if h is None:
+            return
+        K, m = h.texels.shape[1], h.per_pair
+        geometry = self.highlight_geometry
+        for p0, p1 in pixel_ranges(self.n_pixels, K, chunk):
+            first = dr.arange(mi.UInt32, p0 * K, p1 * K) * m         # each pair's first lane
+
+            def body(j, *acc):
+                values = terms(*(dr.gather(mi.Float, a, first + j) for a in geometry))
+                return (j + 1,) + tuple(a + v for a, v in zip(acc, values))
+            state = (dr.zeros(mi.UInt32, dr.width(first)),) + tuple(dr.zeros(mi.Float, dr.width(first))
+                                                                       for _ in range(n_terms))
+            sums = dr.while_loop(state, lambda j, *acc: j < m, body)[1:]
+            dr.eval(*sums)
+            yield p0, p1, np.stack([a.numpy() for a in sums]).reshape(n_terms, p1 - p0, K)
+
     def _channels(self, material, out):
         """Fill ``out`` (3, P, T) with weight * Eq. 4 per colour channel."""
         lk, lg, ch = self._scalars(material)
@@ -135,6 +171,10 @@ class LobeSum:
             dr.eval(rgb)
             for c in range(3):
                 out[c, p0:p1] = rgb[c].numpy().reshape(p1 - p0, self.n_texels)
+        def rgb(lc, td, w):
+            return [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
+        for p0, p1, sums in self._highlight_sums(rgb, 3, VALUE_CHUNK):
+            self.texels.highlights.add_to(out, sums, p0)
         return out
 
     def transport(self, material) -> np.ndarray:
@@ -156,17 +196,7 @@ class LobeSum:
         for p0, p1, directions in self._rows(JACOBIAN_CHUNK):
             cols = None
             for lc, td, w in directions:            # a texel's directions, summed in the kernel
-                basis = spline_basis(td, material.knots)
-                kappa, gamma = lobe_curves(td, lk, lg, material.knots)
-                terms = []
-                for k, g in zip(kappa, gamma):
-                    x = g * dr.fmax(lc, LOG_COS_H_MIN)
-                    ex = dr.exp(x)
-                    u = k * ex
-                    lobe = lobe_value(lc, k, g)
-                    e = (lobe + 1.0) * w            # e^u * weight (the product's order keeps float32 finite)
-                    d_kappa, d_gamma = e * u, (e * k) * (x * ex)
-                    terms += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
+                terms = _jacobian_terms(lc, td, w, lk, lg, material.knots)
                 cols = terms if cols is None else [a + b for a, b in zip(cols, terms)]
             dr.eval(*cols)
             A = [c.numpy().reshape(p1 - p0, self.n_texels) for c in cols]
@@ -175,12 +205,34 @@ class LobeSum:
             else:
                 flat = np.stack([(a @ L).T for a in A])
             sums[..., p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
+        h = self.texels.highlights
+        for p0, p1, A in self._highlight_sums(lambda lc, td, w: _jacobian_terms(lc, td, w, lk, lg, material.knots),
+                                              R * (1 + 2 * N_CONTROL), JACOBIAN_CHUNK):
+            flat = np.einsum("npk,pkc->ncp", A, L[h.texels[p0:p1]])          # A: (columns, pixels, K)
+            sums[..., p0:p1] += flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         sums *= s
         c = material.chromaticity[:, :, None]                      # (R, 3, 1)
         image = (sums[:, 0] * c).sum(axis=0).T
         d_ctrl = (sums[:, 1:] * c[:, None]).reshape(R, 2, N_CONTROL, 3, self.n_pixels)
         d_chroma = sums[:, 0]                                       # (R, 3, P)
         return LobeJacobian(image, d_ctrl, d_chroma)
+
+
+def _jacobian_terms(lc, td, w, lk, lg, knots) -> list:
+    """Per lobe r: weight * lobe_r, then its derivatives by the log kappa and the
+    log gamma control values (module doc), for lanes of geometry (lc, td, w)."""
+    basis = spline_basis(td, knots)
+    kappa, gamma = lobe_curves(td, lk, lg, knots)
+    terms = []
+    for k, g in zip(kappa, gamma):
+        x = g * dr.fmax(lc, LOG_COS_H_MIN)
+        ex = dr.exp(x)
+        u = k * ex
+        lobe = lobe_value(lc, k, g)
+        e = (lobe + 1.0) * w            # e^u * weight (the product's order keeps float32 finite)
+        d_kappa, d_gamma = e * u, (e * k) * (x * ex)
+        terms += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
+    return terms
 
 
 def pixel_ranges(n_pixels, n_directions, pairs) -> list:
@@ -202,8 +254,13 @@ def observed_directions(texels: TexelSum, illumination, rows, chunk=JACOBIAN_CHU
     rows = np.asarray(rows, dtype=np.int64)
     total = np.zeros((N_CELLS, N_CELLS))
     for r0, r1 in pixel_ranges(rows.size, nd, chunk):
-        log_cos, theta_d, weight = (a.numpy().astype(np.float64)
-                                    for a in LobeSum(texels.subset(rows[r0:r1])).geometry)
+        view = LobeSum(texels.subset(rows[r0:r1]))
+        log_cos, theta_d, weight = (a.numpy().astype(np.float64) for a in view.geometry)
         theta_h = np.arccos(np.clip(np.exp(log_cos), 0.0, 1.0))
         total += cell_sums(theta_h, theta_d, weight.reshape(-1, nd) * light)
+        h = view.texels.highlights
+        if h is not None:
+            log_cos, theta_d, weight = (a.numpy().astype(np.float64) for a in view.highlight_geometry)
+            theta_h = np.arccos(np.clip(np.exp(log_cos), 0.0, 1.0))
+            total += cell_sums(theta_h, theta_d, weight.reshape(h.texels.size, -1) * grey[h.texels.reshape(-1), None])
     return DirectionWeights(total)

@@ -1,0 +1,170 @@
+"""What you recover is what Mitsuba renders: the saved ``scene.xml`` rendered by
+Mitsuba against the tool's own re-render and against the photograph.
+
+Each case is a photograph rendered by Mitsuba (``scenes/sphere_envmap.xml``: a
+sphere of a MERL material, its measured data through Mitsuba's ``merl`` plugin,
+under a light probe at full resolution, box filter, ``--photo-spp``), recovered
+by :func:`mi_dsbrdf.recover` on a preset and saved; then the saved
+``scene.xml`` is rendered by Mitsuba twice with different seeds
+(``--spp`` each). Relative L1 over the pixels inference used:
+
+* Mitsuba's render against the tool's re-render (``Result.rerender``);
+* the re-render against the photograph, and Mitsuba's render against it;
+* Mitsuba's render against its own second seed: the Monte Carlo noise floor,
+  under which no other figure can be read.
+
+Cases: the natural-light sets' materials x probes (``--set validation`` or
+``report``, ``--limit`` the first N), at ``--res`` pixels; with ``--sharp`` also
+a 32 px sphere of gold-metallic-paint's DSBRDF with every lobe's gamma at 4700 (a
+lobe about 2.4 degrees wide in reflected direction, narrower than one pixel's
+footprint) under the first probe. Needs ../shared/data.
+
+    .venv/bin/python benchmarks/mitsuba_roundtrip.py --set validation --limit 8    # ~10 min
+
+Writes the result folders under out/mitsuba_roundtrip/<set>/<setting>/, and the
+summary (medians and worst cases, the command) to
+benchmarks/results/mitsuba_roundtrip_<set>.json (with ``--config``, beside the
+result folders; ``--out`` names another file).
+"""
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+
+import numpy as np
+
+from mi_dsbrdf.evaluation.benchmark_cases import DATA, OUT, REPORT_MATERIALS, REPORT_PROBES, RESULTS, \
+    VALIDATION_MATERIALS, VALIDATION_PROBES, have_data, parse_config, setting_name
+
+MEASURES = [("mitsuba_vs_rerender", "Mitsuba vs re-render"), ("rerender_vs_photo", "re-render vs photo"),
+            ("mitsuba_vs_photo", "Mitsuba vs photo"), ("noise", "Mitsuba noise (seed vs seed)")]
+
+
+def relative_l1(a, b, mask) -> float:
+    return float(np.abs(a[mask] - b[mask]).sum() / np.abs(b[mask]).sum())
+
+
+def cases(which, limit):
+    materials, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
+                         else (REPORT_MATERIALS, REPORT_PROBES))
+    out = [(m, p) for p in probes for m in materials]
+    # interleave the probes so that a --limit slice sees every one of them
+    out = [c for i in range(len(materials)) for c in out[i::len(materials)]]
+    return out[:limit] if limit else out
+
+
+#: the sharp case: its material's name, the gamma of its lobes, its image size
+SHARP, SHARP_GAMMA, SHARP_RES = "sharp-gamma4700", 4700.0, 32
+
+
+def photograph(folder, material, probe, res, args):
+    """Render the case's photograph into ``folder``; returns (scene path, image path)."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.app.io import write_exr
+    from mi_dsbrdf.app.scenes import scene_path
+    nbrdf = os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")
+    xml = open(scene_path("sphere_envmap")).read()
+    if material == SHARP:
+        from mi_dsbrdf.brdf.dsbrdf import Material
+        from mi_dsbrdf.model import model_file
+        base = model_file.shipped_model().library_material("gold-metallic-paint")
+        truth_file = os.path.join(folder, "truth.json")
+        Material(base.log_kappa, np.full_like(base.log_gamma, np.log(SHARP_GAMMA)), base.chromaticity).save(truth_file)
+        bsdf = '<bsdf type="dsbrdf"><string name="filename" value="%s"/></bsdf>' % truth_file
+    else:
+        bsdf = ('<bsdf type="merl"><string name="nbrdf" value="%s"/><string name="material" value="%s"/></bsdf>'
+                % (nbrdf, material))
+    truth = xml.replace('<bsdf type="dsbrdf" id="material"/>', bsdf)
+    scene = mi.load_string(truth, envmap=os.path.join(args.data, "envmaps", probe), res=str(res),
+                           spp=str(args.photo_spp))
+    image = os.path.join(folder, "photo.exr")
+    write_exr(image, np.array(mi.render(scene, seed=1), dtype=np.float32))
+    # the scene as a user gives it: the film at the photograph's size (the light's
+    # values are not used, but its file must load)
+    scene_file = os.path.join(folder, "scene.xml")
+    with open(scene_file, "w") as f:
+        f.write(xml.replace('name="res" value="128"', 'name="res" value="%d"' % res).replace(
+            'value="textures/sky.exr"', 'value="%s"' % os.path.join(args.data, "envmaps", probe)))
+    return scene_file, image
+
+
+def case(material, probe, res, args) -> dict:
+    import mitsuba as mi
+
+    import dataclasses
+
+    import mi_dsbrdf
+    from mi_dsbrdf.config import preset
+    name = "%s-%s" % (material, os.path.splitext(os.path.basename(probe))[0])
+    folder = os.path.join(OUT, "mitsuba_roundtrip", args.set, args.setting_name, name)
+    shutil.rmtree(folder, ignore_errors=True)
+    os.makedirs(folder)
+    scene_file, image = photograph(folder, material, probe, res, args)
+    t0 = time.perf_counter()
+    result = mi_dsbrdf.recover(scene_file, image, config=dataclasses.replace(preset(args.preset), **args.config))
+    seconds = time.perf_counter() - t0
+    saved = result.save(os.path.join(folder, "result"))
+    renders = [np.array(mi.render(mi.load_file(os.path.join(saved, "scene.xml")), spp=args.spp, seed=s),
+                        dtype=np.float64) for s in (7, 8)]
+    mitsuba = 0.5 * (renders[0] + renders[1])
+    used, photo = result.used, result.image
+    return {"case": name, "seconds": seconds,
+            "mitsuba_vs_rerender": relative_l1(mitsuba, result.rerender, used),
+            "rerender_vs_photo": relative_l1(result.rerender, photo, used),
+            "mitsuba_vs_photo": relative_l1(mitsuba, photo, used),
+            # the two seeds differ by sqrt(2) times one render's noise, and their mean
+            # has 1/sqrt(2) of it: half their difference is the mean's noise
+            "noise": relative_l1(renders[0], renders[1], used) / 2}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--set", choices=("validation", "report"), default="validation")
+    ap.add_argument("--limit", type=int, default=0, help="the first N cases (0: all)")
+    ap.add_argument("--res", type=int, default=64)
+    ap.add_argument("--sharp", action="store_true", help="add the sharp case (module doc)")
+    ap.add_argument("--preset", default="default")
+    ap.add_argument("--photo-spp", type=int, default=1024)
+    ap.add_argument("--spp", type=int, default=2048, help="samples per pixel of each of the two Mitsuba renders")
+    ap.add_argument("--config", nargs="*", default=[], metavar="FIELD=VALUE", help="Config fields to change")
+    ap.add_argument("--data", default=DATA)
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args(argv)
+    args.config = parse_config(args.config)
+    args.setting_name = setting_name(args.config) if args.config else "defaults"
+    if not have_data(args.data):
+        sys.exit("mitsuba_roundtrip: needs the shared data (%s)" % args.data)
+    rows = []
+    todo = [(m, p, args.res) for m, p in cases(args.set, args.limit)]
+    if args.sharp:
+        todo.append((SHARP, cases(args.set, 1)[0][1], SHARP_RES))
+    for material, probe, res in todo:
+        r = case(material, probe, res, args)
+        rows.append(r)
+        print("%-40s %5.1f s  " % (r["case"], r["seconds"]) +
+              "  ".join("%s %5.1f %%" % (label, 100 * r[k]) for k, label in MEASURES), flush=True)
+    summary = {k: {"median": float(np.median([r[k] for r in rows])), "worst": float(max(r[k] for r in rows))}
+               for k, _ in MEASURES}
+    for k, label in MEASURES:
+        print("%-30s median %5.1f %%  worst %5.1f %%" % (label, 100 * summary[k]["median"],
+                                                          100 * summary[k]["worst"]))
+    excess = [r["mitsuba_vs_photo"] - r["rerender_vs_photo"] for r in rows]
+    print("Mitsuba vs photo minus re-render vs photo: median %+.1f %%, worst %+.1f %% (target <= +1 %%)"
+          % (100 * np.median(excess), 100 * max(excess)))
+    out = args.out or (os.path.join(OUT, "mitsuba_roundtrip", args.set, args.setting_name, "summary.json")
+                       if args.config else os.path.join(RESULTS, "mitsuba_roundtrip_%s.json" % args.set))
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    command = "python benchmarks/mitsuba_roundtrip.py --set %s%s%s%s%s" % (
+        args.set, " --limit %d" % args.limit if args.limit else "", " --sharp" if args.sharp else "",
+        "" if args.preset == "default" else " --preset " + args.preset,
+        " --config " + " ".join("%s=%s" % kv for kv in args.config.items()) if args.config else "")
+    with open(out, "w") as f:
+        json.dump({"summary": summary, "cases": rows, "res": args.res, "spp": args.spp, "photo_spp": args.photo_spp,
+                   "preset": args.preset, "config": args.config, "command": command}, f, indent=1, sort_keys=True)
+
+
+if __name__ == "__main__":
+    main()
