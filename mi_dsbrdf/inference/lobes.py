@@ -17,7 +17,9 @@ derivatives by the spline control values (:mod:`mi_dsbrdf.brdf.curves`) are
 weights are >= 0 and sum to one). So :class:`LobeSum` stores the three numbers
 once per view and light, and one Dr.Jit kernel evaluates every lobe and all 36
 derivative columns; the sums over texels are float32 BLAS products with the
-map. Hand-written for speed: the
+map. With highlight pairs (:mod:`~mi_dsbrdf.inference.highlights`) the same
+values and columns are summed over each pair's lanes in a Dr.Jit loop and added to
+its texel's. Hand-written for speed: the
 plugin path needs one forward-mode pass per column and re-derives the angles in
 every pass. The kernel is Dr.Jit code of the active variant (``cuda_ad_rgb``
 runs it on a GPU); the BLAS products run on the CPU.
