@@ -28,7 +28,7 @@ the relit images' (two other probes) scale-invariant log error and
 Stanford-ORB PSNR (dB); for near-Lambertian materials the recovered peak /
 off-peak ratio (:func:`mi_dsbrdf.evaluation.metrics.highlight_ratio`).
 
-Each case writes ``out/natural_light/<set>[-truthS][-exposureE][-photonsN]/<setting>/<id>.json``
+Each case writes ``out/natural_light/<set>[-truthS][-exposureE][-photonsN][-mitsuba]/<setting>/<id>.json``
 (and ``.npz``, its images) when it finishes; a rerun skips the cases whose file
 exists (delete a setting's folder to run it again after a change of the code).
 
@@ -44,6 +44,7 @@ exists (delete a setting's folder to run it again after a change of the code).
     .venv/bin/python benchmarks/natural_light.py --set report --report       # -> docs/natural_light.{md,png}
     .venv/bin/python benchmarks/natural_light.py --set report --truth-samples 4   # the truth integrated over each texel
     .venv/bin/python benchmarks/natural_light.py --set report --photons 1000 --adam   # with shot noise
+    .venv/bin/python benchmarks/natural_light.py --set validation --mitsuba   # photographed by Mitsuba
 """
 from __future__ import annotations
 
@@ -78,7 +79,7 @@ MEASURES = [("brdf_eq20_paper", "BRDF Eq. 20 paper", False), ("brdf_eq20_cosine"
 
 
 def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None, exposure=1.0,
-          photons=None, bases=None, start=None, fits_from=None) -> list:
+          photons=None, bases=None, start=None, fits_from=None, mitsuba=False) -> list:
     """The cases of a set (``"validation"`` or ``"report"``): each material under
     each probe with ``config`` (Config overrides), then the ``adam`` methods' on the
     same pairs; the other arguments become case fields
@@ -91,6 +92,8 @@ def cases(which, config=None, adam=(), gmm=None, truth_samples=1, materials=None
         truth["exposure"] = exposure
     if photons:
         truth["photons"] = photons
+    if mitsuba:
+        truth["photo"] = "mitsuba"
     extra = dict(truth) if gmm is None else dict(truth, gmm=gmm)
     if bases is not None:
         extra["bases"] = bases
@@ -462,14 +465,14 @@ def write_report(folder, docs=DOCS) -> str:
     return md
 
 
-def run_folder(which, truth_samples=1, exposure=1.0, photons=None, fits_from=None) -> str:
+def run_folder(which, truth_samples=1, exposure=1.0, photons=None, fits_from=None, mitsuba=False) -> str:
     """The folder of a set's runs (one setting a folder in it): ``<set>`` with
-    ``-truth<S>``, ``-exposure<E>``, ``-photons<N>`` for those measures, under
-    ``fits-<model file>/`` for leave-one-out models from another build's fits."""
+    ``-truth<S>``, ``-exposure<E>``, ``-photons<N>``, ``-mitsuba`` for those measures,
+    under ``fits-<model file>/`` for leave-one-out models from another build's fits."""
     fits = ("fits-" + os.path.splitext(os.path.basename(fits_from))[0]) if fits_from else ""
     return os.path.join(OUT, fits, which + ("-truth%d" % truth_samples if truth_samples > 1 else "")
                         + ("-exposure%g" % exposure if exposure != 1.0 else "")
-                        + ("-photons%g" % photons if photons else ""))
+                        + ("-photons%g" % photons if photons else "") + ("-mitsuba" if mitsuba else ""))
 
 
 def main(argv=None):
@@ -500,6 +503,9 @@ def main(argv=None):
     ap.add_argument("--photons", type=float, default=None, metavar="N",
                     help="shot noise: each image as photon counts, N at its mean pixel (Poisson); results under "
                          "<set>-photons<N>/")
+    ap.add_argument("--mitsuba", action="store_true",
+                    help="photograph each case with Mitsuba (its box-filtered pixels, 1024 spp) instead of the texel "
+                         "sum's centre rays; results under <set>-mitsuba/")
     ap.add_argument("--materials", nargs="*", help="only these materials of the set (a slice)")
     ap.add_argument("--start", type=int, default=None, metavar="I",
                     help="one reflectance start, the I-th of reflectance_starts (0: the mean material), instead "
@@ -539,13 +545,14 @@ def main(argv=None):
         sys.exit("--exposure must be a finite number > 0, got %r" % args.exposure)
     if args.photons is not None and not (np.isfinite(args.photons) and args.photons > 0):
         sys.exit("--photons must be a finite number > 0, got %r" % args.photons)
-    out = os.path.join(run_folder(args.set, args.truth_samples, args.exposure, args.photons, args.fits_from), name)
+    out = os.path.join(run_folder(args.set, args.truth_samples, args.exposure, args.photons, args.fits_from,
+                                  args.mitsuba), name)
     if not (args.summary or args.report):
         if not have_data(args.data):
             sys.exit("needs the MERL fits under %s (see ../shared/data/README.md)" % args.data)
         adam = () if args.adam is None else (args.adam or ADAM_METHODS)     # --adam alone: both
         run_on_cluster(cases(args.set, config, adam, args.gmm, args.truth_samples, args.materials,
-                             args.exposure, args.photons, args.bases, args.start, args.fits_from), out,
+                             args.exposure, args.photons, args.bases, args.start, args.fits_from, args.mitsuba), out,
                        args.data, args.workers)
     print("## %s, %s (%s)\n" % (args.set, name, os.path.relpath(out, ROOT)))
     print(write_report(out) if args.report else summary(out))

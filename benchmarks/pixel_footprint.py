@@ -47,7 +47,7 @@ def relative_l1(a, b, mask) -> float:
 def case(material, light, res, k) -> dict:
     import mitsuba as mi
 
-    from mi_dsbrdf.app.result import texel_blocks
+    from mi_dsbrdf.inference.latlong import texel_blocks
     from mi_dsbrdf.evaluation.experiment import dsbrdf_bsdf, render, texels
     from mi_dsbrdf.inference.pixels import interior
     from mi_dsbrdf.inference.scene_dicts import camera

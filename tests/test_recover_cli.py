@@ -9,7 +9,7 @@ import pytest
 
 from mi_dsbrdf.app.cli import main
 from mi_dsbrdf.app.io import write_exr
-from mi_dsbrdf.app.result import TEXEL_BLOCK
+from mi_dsbrdf.inference.latlong import TEXEL_BLOCK
 from mi_dsbrdf.app.scenes import scene_path
 
 RES = 32

@@ -6,7 +6,7 @@ and ``mi-dsbrdf recover``):
     material.json       DSBRDF parameters (``dsbrdf`` plugin ``filename``, ``load_material``), and
                         where the image looked in (theta_h, theta_d) (``Material.observed``)
     illumination.exr    lat-long map, Mitsuba envmap convention (unseen texels black), each
-                        texel as an 8 x 8 block (TEXEL_BLOCK)                            (envmap scenes)
+                        texel as an 8 x 8 block (latlong.TEXEL_BLOCK)                          (envmap scenes)
     light.json          {"type", "direction": unit vector object -> light, "intensity"
                          (irradiance, or W/sr for a point light, which also has "position")}
     scene.xml           the input scene with the recovered material and light (when the
@@ -33,22 +33,9 @@ import numpy as np
 from mi_dsbrdf.app.io import save_preview, staged_output, write_exr
 from mi_dsbrdf.app.outputs import illumination_preview, material_preview, write_scene_xml
 from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.inference.latlong import texel_blocks
 
 #: every file a result directory can hold (``--force`` replaces only such a folder)
-#: illumination.exr repeats each fitted texel as a TEXEL_BLOCK x TEXEL_BLOCK block:
-#: inference treats a texel as constant, Mitsuba's envmap interpolates bilinearly
-#: between texel centres, and the blocks confine that blend to their edges
-#: (docs/design.md)
-TEXEL_BLOCK = 8
-
-
-def texel_blocks(illumination, block=TEXEL_BLOCK) -> np.ndarray:
-    """(H * block, W * block, 3) float32: each texel of an (H, W, 3) lat-long map
-    repeated as a block x block block. Averaging the blocks gives the map back."""
-    m = np.asarray(illumination, dtype=np.float32)
-    return np.repeat(np.repeat(m, block, axis=0), block, axis=1)
-
-
 RESULT_FILES = ("material.json", "illumination.exr", "light.json", "scene.xml", "log.json", "input.png",
                 "rerender.png", "residual.png", "material.png", "illumination.png")
 

@@ -87,6 +87,7 @@ from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_er
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import read_image
+from mi_dsbrdf.inference.latlong import texel_blocks
 from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import usable_pixels
@@ -140,6 +141,16 @@ def render(ts, illumination=None, direction=None, point=None) -> np.ndarray:
     img = np.zeros((h * w, 3))
     img[ts.pixels] = ts.render(np.asarray(illumination).reshape(-1, 3))
     return img.reshape(h, w, 3)
+
+
+def mitsuba_photo(bsdf: dict, res: int, illumination, shape="sphere", spp=1024) -> np.ndarray:
+    """(H, W, 3) float64 Mitsuba render (``direct``, box filter) of ``shape`` carrying
+    ``bsdf`` under the map ``illumination`` (h, w, 3), its texels written as blocks
+    (as the tool saves a map), seen by the shipped camera."""
+    scene = {"type": "scene", "integrator": {"type": "direct", "hide_emitters": True}, "sensor": camera(res),
+             "object": shape_dict(shape, bsdf), "light": {"type": "envmap", "bitmap": mi.Bitmap(texel_blocks(
+                 np.asarray(illumination, dtype=np.float32)))}}
+    return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=0), dtype=np.float64)
 
 
 def shot_noise(image, mask, photons, seed) -> np.ndarray:
@@ -264,7 +275,10 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         probe = read_image(os.path.join(data, "envmaps", case["probe"]))
         truth = downsample(probe, 2 * H, 2 * W)
         ts = texels(merl, res, (2 * H, 2 * W), shape=shape, samples=case.get("truth_samples", 1))
-        img = render(ts, truth.reshape(-1, 3)) * case.get("exposure", 1.0)
+        if case.get("photo") == "mitsuba":           # box-filtered pixels, the map sampled continuously
+            img = mitsuba_photo(merl, res, truth, shape) * case.get("exposure", 1.0)
+        else:
+            img = render(ts, truth.reshape(-1, 3)) * case.get("exposure", 1.0)
         if case.get("photons"):
             img = shot_noise(img, ts.mask, case["photons"], seed=case["id"])
         keep = usable_pixels(ts.mask, img)          # the app's pixels: the silhouette ring dropped

@@ -41,6 +41,21 @@ def texel_directions(height: int, width: int, side: int) -> tuple:
     return d.reshape(-1, 3), omega.reshape(-1)
 
 
+#: a map written for Mitsuba repeats each texel as a TEXEL_BLOCK x TEXEL_BLOCK block:
+#: inference treats a texel as constant, Mitsuba's envmap interpolates bilinearly
+#: between texel centres, and the blocks confine that blend to their edges
+#: (docs/design.md)
+TEXEL_BLOCK = 8
+
+
+def texel_blocks(illumination, block=TEXEL_BLOCK) -> np.ndarray:
+    """(H * block, W * block, 3) float32: each texel of an (H, W, 3) lat-long map
+    repeated as a block x block block (``illumination.exr``). Averaging the blocks
+    gives the map back."""
+    m = np.asarray(illumination, dtype=np.float32)
+    return np.repeat(np.repeat(m, block, axis=0), block, axis=1)
+
+
 def direction_to_uv(d) -> np.ndarray:
     """(N, 2) lat-long coordinates in [0, 1) of world directions (N, 3)."""
     d = np.asarray(d, dtype=np.float64).reshape(-1, 3)
