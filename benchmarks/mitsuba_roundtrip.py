@@ -21,6 +21,24 @@ footprint) under the first probe. Needs ../shared/data.
 
     .venv/bin/python benchmarks/mitsuba_roundtrip.py --set validation --limit 8    # ~10 min
 
+With ``--footprint``, no recovery: the forward model
+(:class:`~mi_dsbrdf.inference.forward.TexelSum`, one ray through each pixel's
+centre, ``texel_samples`` x ``texel_samples`` directions per texel) against
+Mitsuba's render of the same sphere (box filter, 4096 spp, the map written as
+``illumination.exr`` is, in 8x8 texel blocks) under a 32x64 map, at 32 and 64 px:
+
+* the forward model at 1, 2 and 8 directions per texel side (centre rays);
+* at 2 directions per texel side, traced at ``k`` times the resolution and
+  averaged over each pixel's k x k block (the pixel's area);
+* at 2 directions per texel side with the highlight pairs of 25 texels a pixel
+  (:mod:`mi_dsbrdf.inference.highlights`, ``--highlight-texels 25``).
+
+Relative L1 over the sphere without its silhouette ring
+(:func:`~mi_dsbrdf.inference.pixels.interior`), beside Mitsuba's noise, for
+gold-metallic-paint and the same with every lobe's gamma at 4700, under the
+procedural sky and, with ../shared/data, the grace probe (~6 min; writes
+benchmarks/results/pixel_footprint.json).
+
 Writes the result folders under out/mitsuba_roundtrip/<set>/<setting>/, and the
 summary (medians and worst cases, the command) to
 benchmarks/results/mitsuba_roundtrip_<set>.json (with ``--config``, beside the
@@ -120,6 +138,75 @@ def case(material, probe, res, args) -> dict:
             "noise": relative_l1(renders[0], renders[1], used) / 2}
 
 
+#: --footprint: the map (texels), Mitsuba's samples per pixel, the forward model's
+#: directions per texel side, and the highlight pairs measured (``Config.highlight_texels``)
+FOOTPRINT_MAP, FOOTPRINT_SPP, FOOTPRINT_SAMPLES, HIGHLIGHT_TEXELS = (32, 64), 4096, (1, 2, 8), 25
+
+
+def footprint_case(material, light, res, k) -> dict:
+    """One sphere of ``material`` under ``light`` (H, W, 3) at ``res`` px; relative L1s (module doc)."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.evaluation.experiment import dsbrdf_bsdf, render, texels
+    from mi_dsbrdf.inference.latlong import texel_blocks
+    from mi_dsbrdf.inference.pixels import interior
+    from mi_dsbrdf.inference.scene_dicts import camera
+    bsdf = dsbrdf_bsdf(material)
+    scene = {"type": "scene", "integrator": {"type": "direct", "hide_emitters": True}, "sensor": camera(res),
+             "object": {"type": "sphere", "bsdf": bsdf},
+             "sky": {"type": "envmap", "bitmap": mi.Bitmap(texel_blocks(light))}}
+    loaded = mi.load_dict(scene)
+    seeds = [np.array(mi.render(loaded, spp=FOOTPRINT_SPP, seed=s), dtype=np.float64) for s in (3, 4)]
+    mitsuba = 0.5 * (seeds[0] + seeds[1])
+    mask = interior(texels({"type": "dsbrdf"}, res, FOOTPRINT_MAP).mask)
+    out = {"mitsuba_noise": relative_l1(seeds[0], seeds[1], mask) / 2}
+    for s in FOOTPRINT_SAMPLES:
+        ts = texels({"type": "dsbrdf"}, res, FOOTPRINT_MAP, samples=s).with_bsdf(bsdf)
+        out["centre_rays_samples_%d" % s] = relative_l1(render(ts, light.reshape(-1, 3)), mitsuba, mask)
+    ts = texels({"type": "dsbrdf"}, res * k, FOOTPRINT_MAP, samples=2).with_bsdf(bsdf)
+    area = render(ts, light.reshape(-1, 3)).reshape(res, k, res, k, 3).mean(axis=(1, 3))
+    out["pixel_area_samples_2"] = relative_l1(area, mitsuba, mask)
+    ts = texels({"type": "dsbrdf"}, res, FOOTPRINT_MAP).with_map_size(FOOTPRINT_MAP, 2, HIGHLIGHT_TEXELS)
+    ts = ts.with_bsdf(bsdf)
+    out["highlight_pairs_samples_2"] = relative_l1(render(ts, light.reshape(-1, 3)), mitsuba, mask)
+    return out
+
+
+def footprint(args):
+    """The --footprint cases; writes ``args.out`` or results/pixel_footprint.json."""
+    out = args.out or os.path.join(RESULTS, "pixel_footprint.json")
+    import mi_dsbrdf  # noqa: F401  (variant, plugins)
+    from mi_dsbrdf.brdf.dsbrdf import Material
+    from mi_dsbrdf.evaluation.experiment import downsample
+    from mi_dsbrdf.inference.images import read_image
+    from mi_dsbrdf.inference.latlong import procedural_sky
+    from mi_dsbrdf.model import model_file
+    base = model_file.shipped_model().library_material("gold-metallic-paint")
+    materials = {"gold-metallic-paint": base,
+                 "gamma 4700": Material(base.log_kappa, np.full_like(base.log_gamma, np.log(4700.0)),
+                                        base.chromaticity)}
+    lights = {"sky": downsample(procedural_sky(256, 512).astype(np.float64), *FOOTPRINT_MAP)}
+    if have_data(args.data):
+        grace = read_image(os.path.join(args.data, "envmaps", "probulator", "grace.hdr"))
+        lights["grace"] = downsample(grace, *FOOTPRINT_MAP)
+    results = {}
+    for (res, k) in ((32, 8), (64, 4)):
+        for mname, material in materials.items():
+            for lname, light in lights.items():
+                r = footprint_case(material, light, res, k)
+                results["%d px, %s, %s" % (res, mname, lname)] = r
+                centre = "  ".join("%d dirs %5.1f %%" % (s, 100 * r["centre_rays_samples_%d" % s])
+                                   for s in FOOTPRINT_SAMPLES)
+                print("%3d px  %-20s %-6s  Mitsuba noise %4.1f %%  centre rays: %s   pixel area (%dx%d rays): %5.1f %%"
+                      "   highlight pairs: %5.1f %%" % (res, mname, lname, 100 * r["mitsuba_noise"], centre, k, k,
+                                                        100 * r["pixel_area_samples_2"],
+                                                        100 * r["highlight_pairs_samples_2"]), flush=True)
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    with open(out, "w") as f:
+        json.dump({"cases": results, "map": list(FOOTPRINT_MAP), "mitsuba_spp": FOOTPRINT_SPP,
+                   "command": "python benchmarks/mitsuba_roundtrip.py --footprint"}, f, indent=1, sort_keys=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--set", choices=("validation", "report"), default="validation")
@@ -132,7 +219,11 @@ def main(argv=None):
     ap.add_argument("--config", nargs="*", default=[], metavar="FIELD=VALUE", help="Config fields to change")
     ap.add_argument("--data", default=DATA)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--footprint", action="store_true",
+                    help="the forward model's image formation against Mitsuba's, no recovery (module doc)")
     args = ap.parse_args(argv)
+    if args.footprint:
+        return footprint(args)
     args.config = parse_config(args.config)
     args.setting_name = setting_name(args.config) if args.config else "defaults"
     if not have_data(args.data):

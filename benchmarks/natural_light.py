@@ -45,6 +45,13 @@ exists (delete a setting's folder to run it again after a change of the code).
     .venv/bin/python benchmarks/natural_light.py --set report --truth-samples 4   # the truth integrated over each texel
     .venv/bin/python benchmarks/natural_light.py --set report --photons 1000 --adam   # with shot noise
     .venv/bin/python benchmarks/natural_light.py --set validation --mitsuba   # photographed by Mitsuba
+    .venv/bin/python benchmarks/natural_light.py --light-colours   # the light-colour prior's spreads, seconds
+
+The summary also scores this tool's posterior band (``posterior`` of
+:func:`~mi_dsbrdf.evaluation.experiment.run_case`) at each temperature, and names
+the one whose median coverage on observed cells lies nearest the middle of
+:data:`COVERAGE_TARGET` (on validation: the choice of
+``mi_dsbrdf.inference.reflectance.POSTERIOR_TEMPERATURE``).
 """
 from __future__ import annotations
 
@@ -193,6 +200,10 @@ def summary(folder) -> str:
                "| case | peak / off-peak: recovered | measured |", "|---|---|---|"]
         md += ["| %s | %.2f | %.2f |" % (r["case"]["id"], r["highlight_ratio"], r["truth_highlight_ratio"])
                for r in flat]
+    if posterior_rows(rows):
+        md += ["", "The material's posterior: its 90 % band against the truth (after Eq. 20's best scale) on the "
+               "MERL (θh, θd) cells, observed and elsewhere, at each temperature of the Laplace approximation:",
+               "", posterior_table(rows)]
     md += ["", "| case | seconds | " + " | ".join("%s (nothing)" % label for _, label, _ in MEASURES) + " |",
            "|---|---|" + "---|" * len(MEASURES)]
     for r in sorted(rows, key=lambda r: r["case"]["id"]):
@@ -200,6 +211,85 @@ def summary(folder) -> str:
             "%.3f (%.3f)" % (value(r, k), value(r["baseline"], k)) if k in r else "–" for k, _, _ in MEASURES)))
     return "\n".join(md) + "\n"
 
+
+#: the target band of the posterior's coverage of the truth on observed (theta_h,
+#: theta_d) cells (median over cases); the temperature chosen on validation is the
+#: one whose median lies nearest the band's middle
+COVERAGE_TARGET = (0.75, 0.95)
+
+
+def posterior_rows(rows) -> list:
+    """This tool's results that carry a posterior band (``posterior``)."""
+    return [r for r in own_rows(rows) if "posterior" in r]
+
+
+def posterior_table(rows) -> str:
+    """Markdown: per temperature, the median over cases of the 90 % band's coverage
+    of the truth and its width (log(rho + 1e-6)), on observed cells and elsewhere,
+    and the median of the cases' width ratio; then the chosen temperature and the
+    Laplace approximation's share of a recovery's time."""
+    rows = posterior_rows(rows)
+    if not rows:
+        return ""
+    temps = sorted(rows[0]["posterior"]["temperature"], key=float)
+    md = ["| temperature | coverage, observed | coverage, unobserved | width, observed | width, unobserved | "
+          "width observed / unobserved |", "|---|---|---|---|---|---|"]
+    for t in temps:
+        b = [r["posterior"]["temperature"][t] for r in rows]
+        med = {k: float(np.nanmedian([x[k] for x in b])) for k in b[0]}
+        ratio = float(np.nanmedian([x["width_observed"] / x["width_unobserved"] for x in b]))
+        md.append("| %s%s | %.2f | %.2f | %.2f | %.2f | %.2f |" % (
+            t, " (shipped)" if float(t) == rows[0]["posterior"]["default"] else "", med["coverage_observed"],
+            med["coverage_unobserved"], med["width_observed"], med["width_unobserved"], ratio))
+    share = np.median([r["posterior"]["seconds"] / r["seconds"] for r in rows])
+    md += ["", "%d cases; the temperature whose median coverage on observed cells is nearest %.2f: %s. "
+           "The Laplace approximation takes %.1f %% of a recovery's time (median)."
+           % (len(rows), np.mean(COVERAGE_TARGET), choose_temperature(rows), 100 * share)]
+    return "\n".join(md)
+
+
+def choose_temperature(rows) -> str:
+    """The temperature (a key of ``posterior.temperature``) whose median coverage
+    on observed cells over ``rows`` lies nearest the middle of COVERAGE_TARGET."""
+    rows = posterior_rows(rows)
+    middle = np.mean(COVERAGE_TARGET)
+    return min(rows[0]["posterior"]["temperature"], key=lambda t: abs(float(np.nanmedian(
+        [r["posterior"]["temperature"][t]["coverage_observed"] for r in rows])) - middle))
+
+
+# --- the light-colour prior's spreads (--light-colours) ---------------------------------------
+
+def light_colour(probe, data=DATA, size=(32, 64)) -> tuple:
+    """(chromaticity (3,), (temperature, tint)) of a probe's mean light at 32x64
+    (the solid-angle-weighted mean radiance, what a white sphere sees)."""
+    from mi_dsbrdf.evaluation.experiment import downsample
+    from mi_dsbrdf.inference.illumination_priors import LIGHT_AXES, LightColourPrior
+    from mi_dsbrdf.inference.images import read_image
+    env = downsample(read_image(os.path.join(data, "envmaps", probe)), *size)
+    log_m = LightColourPrior.colour(np.log(np.maximum(env, 1e-30)))
+    m = np.exp(log_m)
+    return m / m.sum(), log_m @ LIGHT_AXES
+
+
+def spreads(probes, data=DATA) -> np.ndarray:
+    """(temperature, tint) root mean square over ``probes``: ``Config.light_temperature_sigma``
+    and ``light_tint_sigma`` over the validation probes."""
+    y = np.array([light_colour(p, data)[1] for p in probes])
+    return np.sqrt((y ** 2).mean(axis=0))
+
+
+def light_colours_table(data=DATA) -> str:
+    """Markdown: each probe's mean light colour; the spreads over the validation probes
+    (the report probes are listed beside, not used)."""
+    md = ["| probe | set | chromaticity | temperature | tint |", "|---|---|---|---|---|"]
+    for probes, name in ((VALIDATION_PROBES, "validation"), (REPORT_PROBES, "report")):
+        for p in probes:
+            c, (t, g) = light_colour(p, data)
+            md.append("| %s | %s | (%.3f, %.3f, %.3f) | %+.3f | %+.3f |" % (os.path.basename(p), name, *c, t, g))
+    t, g = spreads(VALIDATION_PROBES, data)
+    md.append("\nRoot mean square over the validation probes: temperature %.3f, tint %.3f "
+              "(Config.light_temperature_sigma, light_tint_sigma)" % (t, g))
+    return "\n".join(md)
 
 
 #: the measures a setting is chosen on (BRDF, illumination and what a user sees)
@@ -517,9 +607,15 @@ def main(argv=None):
                     help="leave-one-out models from the full fits stored in this model file (a build-model "
                          "--out) instead of the shipped one's (validation only); results under "
                          "fits-<file name>/, apart from the settings the rule chooses among")
+    ap.add_argument("--light-colours", action="store_true",
+                    help="print each probe's mean light colour and the spreads over the validation probes "
+                         "(Config.light_temperature_sigma, light_tint_sigma); seconds")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
+    if args.light_colours:
+        print(light_colours_table(args.data))
+        return
     if args.choose:
         choice = choose(run_folder("validation"), reference=args.reference,
                         second_run=run_folder("validation", exposure=SECOND_RUN_EXPOSURE))

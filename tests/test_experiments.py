@@ -558,9 +558,9 @@ def test_natural_light_choose_judges_a_setting_with_a_second_run_on_both_runs(tm
 def test_the_light_colour_spreads_are_those_of_the_validation_probes(data):
     """Config.light_temperature_sigma and light_tint_sigma are the root mean square
     colour temperature and tint of the validation probes' mean light
-    (benchmarks/light_colours.py), rounded to 0.01; no report probe enters."""
+    (benchmarks/natural_light.py --light-colours), rounded to 0.01; no report probe enters."""
     from mi_dsbrdf.config import Config
-    light_colours = benchmark("light_colours")
+    light_colours = benchmark("natural_light")
     t, g = light_colours.spreads(bc.VALIDATION_PROBES, data)
     cfg = Config()
     assert (cfg.light_temperature_sigma, cfg.light_tint_sigma) == (round(t, 2), round(g, 2))

@@ -6,7 +6,7 @@ at its centre and a texel from s x s directions. A lobe narrower than the
 directions one pixel reflects, or than the spacing of those directions, is
 sampled too coarsely there; Mitsuba, which averages each pixel over its area
 (box filter) and the map over every direction, renders it tens of percent
-differently (``benchmarks/pixel_footprint.py``). Only pairs near a pixel's
+differently (``benchmarks/mitsuba_roundtrip.py --footprint``). Only pairs near a pixel's
 mirror direction see such a lobe. So for each pixel the K texels
 (``Config.highlight_texels``) whose centres lie closest to the mirror direction
 of its centre ray are taken out of the texel sum and integrated instead over
