@@ -24,6 +24,7 @@ import numpy as np
 from scipy.special import gammaln, logsumexp
 
 from mi_dsbrdf.brdf.angles import log_cos_h
+from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma
 from mi_dsbrdf.brdf.curves import DEFAULT_KNOTS, N_CONTROL, check_knots, eval_log_curve, spline_basis
 from mi_dsbrdf.brdf.observed import DirectionWeights
 from mi_dsbrdf.brdf.xp import expm1, ops
@@ -40,6 +41,11 @@ LOG_KAPPA_MAX = math.log(KAPPA_MAX)
 LOG_GAMMA_MIN, LOG_GAMMA_MAX = math.log(GAMMA_MIN), math.log(GAMMA_MAX)
 LOG_COS_H_MIN = math.log(COS_H_MIN)
 FORMAT = "mi-dsbrdf/material"
+#: the parameters of one lobe (:meth:`Material.parameters`): log kappa and log gamma
+#: control values, two chromaticity variables
+LOBE_PARAMETERS = 2 * N_CONTROL + 2
+#: the floor of the chromaticities whose variables :meth:`Material.parameters` gives
+CHROMA_FLOOR = 1e-12
 
 
 def lobe_curves(theta_d, log_kappa, log_gamma, knots=DEFAULT_KNOTS):
@@ -143,10 +149,14 @@ class Material:
         (kept for provenance and as the starting point of refits).
     observed : :class:`~mi_dsbrdf.brdf.observed.DirectionWeights` or its dict, optional
         Where the image it was recovered from looked (:meth:`observed`).
+    covariance_factor : (LOBE_PARAMETERS R, m) array_like, optional
+        F with the posterior covariance F F^T of :meth:`parameters` (a recovered
+        material: the Laplace approximation at the MAP, with the light held at
+        its MAP); :meth:`sample` and :meth:`band` draw from it.
     """
 
     def __init__(self, log_kappa, log_gamma, chromaticity, knots=DEFAULT_KNOTS, name=None, psi=None,
-                 observed=None):
+                 observed=None, covariance_factor=None):
         self.log_kappa = _as_lobe_array(log_kappa, N_CONTROL, "log_kappa")
         self.log_gamma = _as_lobe_array(log_gamma, N_CONTROL, "log_gamma")
         self.chromaticity = _as_lobe_array(chromaticity, 3, "chromaticity")
@@ -171,6 +181,16 @@ class Material:
         self.psi = None if psi is None else np.asarray(psi, dtype=np.float64).reshape(-1)
         self._observed = observed if observed is None or isinstance(observed, DirectionWeights) \
             else DirectionWeights.from_dict(observed)
+        self.covariance_factor = None
+        if covariance_factor is not None:
+            try:
+                F = np.array(covariance_factor, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise MaterialError("covariance_factor must be a table of numbers") from None
+            if F.ndim != 2 or F.shape[0] != LOBE_PARAMETERS * r or not np.all(np.isfinite(F)):
+                raise MaterialError("covariance_factor must be a finite (%d, m) table for %d lobe%s, got shape %s"
+                                    % (LOBE_PARAMETERS * r, r, "" if r == 1 else "s", F.shape))
+            self.covariance_factor = F
 
     # --- construction ------------------------------------------------------
     @classmethod
@@ -200,7 +220,53 @@ class Material:
         """This material recording ``observed`` (a
         :class:`~mi_dsbrdf.brdf.observed.DirectionWeights`), as a new Material."""
         return Material(self.log_kappa, self.log_gamma, self.chromaticity, knots=self.knots, name=self.name,
-                        psi=self.psi, observed=observed)
+                        psi=self.psi, observed=observed, covariance_factor=self.covariance_factor)
+
+    def with_covariance(self, factor) -> "Material":
+        """This material with the posterior covariance ``factor`` F F^T of its
+        :meth:`parameters` (``covariance_factor``), as a new Material."""
+        return Material(self.log_kappa, self.log_gamma, self.chromaticity, knots=self.knots, name=self.name,
+                        psi=self.psi, observed=self._observed, covariance_factor=factor)
+
+    # --- the posterior -------------------------------------------------------
+    def parameters(self) -> np.ndarray:
+        """(LOBE_PARAMETERS R,) the material as one vector: log kappa control values
+        (R, 6), log gamma control values (R, 6), chromaticity variables (R, 2)
+        (:func:`~mi_dsbrdf.brdf.chromaticity.chroma_logits`), flattened in that order."""
+        return np.concatenate([self.log_kappa.ravel(), self.log_gamma.ravel(),
+                               chroma_logits(self.chromaticity, floor=CHROMA_FLOOR).ravel()])
+
+    @property
+    def covariance(self):
+        """(LOBE_PARAMETERS R, LOBE_PARAMETERS R) posterior covariance of
+        :meth:`parameters`, or None for a material without one."""
+        F = self.covariance_factor
+        return None if F is None else F @ F.T
+
+    def sample(self, n, seed=0) -> list:
+        """``n`` materials drawn from the posterior (parameters ~ N(:meth:`parameters`,
+        :attr:`covariance`); control values clamped as a basis point's are).
+        MaterialError for a material without a covariance."""
+        if self.covariance_factor is None:
+            raise MaterialError("this material has no posterior covariance (only a recovered one does)")
+        R, F = self.n_lobes, self.covariance_factor
+        theta = self.parameters()[None] + np.random.default_rng(seed).standard_normal((int(n), F.shape[1])) @ F.T
+        out = []
+        for t in theta:
+            log_kappa, log_gamma = clamp_controls(t[:N_CONTROL * R].reshape(R, N_CONTROL),
+                                                  t[N_CONTROL * R:2 * N_CONTROL * R].reshape(R, N_CONTROL))
+            out.append(Material(log_kappa, log_gamma, softmax_chroma(t[2 * N_CONTROL * R:].reshape(R, 2)),
+                                knots=self.knots, name=self.name))
+        return out
+
+    def band(self, theta_h, theta_d, level=0.9, n=256, seed=0) -> tuple:
+        """(lo, hi), each (N, 3) float64 in 1/sr: the central ``level`` band of the
+        BRDF at half/difference angles (radians) over ``n`` posterior samples
+        (:meth:`sample`). Where :meth:`observed` is zero the band is the prior's."""
+        if not 0 < level < 1:
+            raise ValueError("level must lie in (0, 1), got %r" % (level,))
+        values = np.stack([m.eval(theta_h, theta_d) for m in self.sample(n, seed)])
+        return tuple(np.quantile(values, [(1 - level) / 2, (1 + level) / 2], axis=0))
 
     def observed(self, theta_h, theta_d):
         """How much of the image's light-weighted pixel x light pairs saw each
@@ -241,6 +307,8 @@ class Material:
             d["psi"] = self.psi.tolist()
         if self._observed is not None:
             d["observed"] = self._observed.to_dict()
+        if self.covariance_factor is not None:
+            d["covariance_factor"] = self.covariance_factor.tolist()
         return d
 
     @classmethod
@@ -252,7 +320,8 @@ class Material:
             raise MaterialError("%s lacks %s" % (source, ", ".join(missing)))
         try:
             m = cls(d["log_kappa"], d["log_gamma"], d["chromaticity"], knots=d.get("knots", DEFAULT_KNOTS),
-                    name=d.get("name"), psi=d.get("psi"), observed=d.get("observed"))
+                    name=d.get("name"), psi=d.get("psi"), observed=d.get("observed"),
+                    covariance_factor=d.get("covariance_factor"))
         except MaterialError as e:
             raise MaterialError("%s: %s" % (source, e)) from None
         lobes = d.get("lobes", m.n_lobes)

@@ -61,6 +61,11 @@ every method alike) and scores it:
 * ``baseline``: doing nothing, scored on the same case: the leave-one-out
   model's mean material (psi = 0) in every BRDF and relighting measure, and for
   probes a constant map in ``illumination_error`` on the same seen texels;
+* ``posterior`` (this tool's answers): the material's posterior band
+  (:func:`~mi_dsbrdf.evaluation.metrics.band_scores`: its coverage of the
+  truth and its width, where the image looked and elsewhere) at each of
+  :data:`TEMPERATURES` and the shipped one, and the seconds the Laplace
+  approximation took;
 * ``terms``: the last logged round's negative log posterior term by term
   (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
@@ -80,8 +85,8 @@ import numpy as np
 from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
-from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
-                                          log_error_by_theta_d,
+from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, band_scores, bsdf_values, direction_error_deg,
+                                          highlight_ratio, log_error_by_theta_d,
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
                                           scale_invariant_log_error, split_errors)
 from mi_dsbrdf.inference.envmap import recover_envmap
@@ -91,12 +96,17 @@ from mi_dsbrdf.inference.latlong import texel_blocks
 from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import usable_pixels
-from mi_dsbrdf.inference.reflectance import reflectance_starts
+from mi_dsbrdf.inference.reflectance import POSTERIOR_TEMPERATURE, reflectance_starts
 from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.build import DEFAULT_K, GMM, build_from_fits, gmm_structure, save_model, stored_fits
 from mi_dsbrdf.model.samples import samples_from_table
 
+#: the posterior band scored (``posterior``), and the temperatures
+#: (:meth:`~mi_dsbrdf.inference.reflectance.Laplace.factor`) it is scored at
+#: beside the shipped one
+BAND_LEVEL = 0.9
+TEMPERATURES = (100, 300, 1000, 2000, 4000, 10000)
 #: probes used for relighting (the first two that differ from the case's probe)
 RELIGHT_PROBES = ["probulator/pisa.hdr", "probulator/uffizi.hdr", "probulator/ennis.hdr"]
 #: point light of the point cases: distance from the object's centre, intensity (W/sr)
@@ -255,6 +265,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
                     **weights})
     out = {"case": case, "specularity": specularity(name)}
     small = seen = None           # the truth map at the recovered resolution and its seen texels (probes)
+    laplace = None                # the material's posterior (this tool's answers)
     t0 = time.perf_counter()
     if case["kind"] == "point":
         d_true = light_at(case["angle"])
@@ -265,7 +276,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         where = _observed(ts.with_point(POINT_DISTANCE * d_true), np.full((1, 3), POINT_INTENSITY), keep, samples)
         result = recover_light(ts, img, keep, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
-        material, rows = result.material, result.log
+        material, rows, laplace = result.material, result.log, result.laplace
         values = material.eval(samples.theta_h, samples.theta_d)
         out["direction_error_deg"] = direction_error_deg(result.light["direction"], d_true)
         out["intensity_ratio"] = result.light["intensity"] / POINT_INTENSITY
@@ -297,6 +308,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
                             if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
                                      "gradient", "chromaticity", "light_colour")}
             material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
+            laplace = result.laplace
             values = material.eval(samples.theta_h, samples.theta_d)
         else:
             fit = adam_recover(img, keep, res, (H, W), method, model, spp=case.get("spp", 16),
@@ -312,10 +324,18 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         out["seen_fraction"] = float(seen.mean())
         maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
     for c in CONVENTIONS:
-        out["brdf_eq20_" + c], scale = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)
+        out["brdf_eq20_" + c], s = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)
         if c == "paper":
+            scale = s
             out["brdf_eq20_paper_by_theta_d"] = log_error_by_theta_d(values, samples.values, samples.theta_d, scale)
     out.update(_observed_errors(values, samples, where))
+    if laplace is not None:
+        # the posterior band at each temperature, the shipped one among them
+        bands = {"%g" % t: band_scores(material.with_covariance(laplace.factor(t)), samples, where, scale,
+                                       BAND_LEVEL)
+                 for t in sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE})}
+        out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "seconds": laplace.seconds,
+                            "temperature": bands}
     if getattr(material, "psi", None) is not None:
         out["material"] = {"psi": material.psi.tolist(), "chromaticity": material.chromaticity.tolist()}
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)

@@ -15,7 +15,9 @@ use them; they are re-exported here beside the measures of a recovery:
 * :func:`highlight_ratio` — peak over off-peak of a BRDF: whether a
   near-Lambertian material came back with a highlight;
 * :func:`bsdf_values` — any Mitsuba BSDF on the MERL grid, to score baselines
-  on the same samples as the DSBRDF.
+  on the same samples as the DSBRDF;
+* :func:`band_scores` — whether a recovered material's posterior band holds the
+  truth (its coverage) and how wide it is, where the image looked and elsewhere.
 """
 from __future__ import annotations
 
@@ -105,3 +107,35 @@ def bsdf_values(bsdf, samples) -> np.ndarray:
     si.n = mi.Normal3f(0, 0, 1)
     v = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(np.asarray(c, np.float32) for c in wo)))
     return np.array(v, dtype=np.float64).T.reshape(n, 3) / np.asarray(wo[2], np.float64)[:, None]
+
+
+def band_scores(material, samples, where, scale, level=0.9, n=128, seed=0) -> dict:
+    """The posterior band of a recovered ``material`` (with a covariance,
+    :meth:`~mi_dsbrdf.brdf.dsbrdf.Material.band`) against measured ``samples``.
+
+    Per (theta_h, theta_d) cell of the samples (the DSBRDF has no phi_d): the
+    truth is the median over the cell's samples of values / ``scale`` (Eq. 20's
+    best scale of the material, s model ~ truth); ``where`` (N,) bool marks the
+    samples the image saw (a cell is observed if any of its samples is).
+
+    Returns {"coverage_observed", "coverage_unobserved"}: the share of (cell,
+    channel) whose truth lies inside the ``level`` band; {"width_observed",
+    "width_unobserved"}: the band's median width in log(rho + 1e-6) (the paper's
+    convention); NaN where there are no such cells."""
+    th, td = np.asarray(samples.theta_h), np.asarray(samples.theta_d)
+    cells, index = np.unique(np.stack([th, td], axis=1), axis=0, return_inverse=True)
+    index = index.reshape(-1)
+    order = np.argsort(index, kind="stable")
+    starts = np.searchsorted(index[order], np.arange(cells.shape[0]))
+    values = np.asarray(samples.values, dtype=np.float64)[order] / scale
+    truth = np.stack([np.median(v, axis=0) for v in np.split(values, starts[1:])])
+    seen = np.zeros(cells.shape[0], bool)
+    np.logical_or.at(seen, index, np.asarray(where, bool).reshape(-1))
+    lo, hi = material.band(cells[:, 0], cells[:, 1], level, n, seed)
+    inside = (truth >= lo) & (truth <= hi)
+    width = np.log(np.maximum(hi, 0) + PAPER_FLOOR) - np.log(np.maximum(lo, 0) + PAPER_FLOOR)
+    out = {}
+    for part, cell in (("observed", seen), ("unobserved", ~seen)):
+        out["coverage_" + part] = float(inside[cell].mean()) if cell.any() else float("nan")
+        out["width_" + part] = float(np.median(width[cell])) if cell.any() else float("nan")
+    return out

@@ -62,7 +62,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
-from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
+from mi_dsbrdf.inference.reflectance import image_chroma_logits, laplace, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 from mi_dsbrdf.model.priors import LOG_CHROMA_BASIS
 
@@ -152,9 +152,14 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         end = (end, other)[won]
     psi, logits, log_map, seen, _ = end
     chroma = softmax_chroma(logits)
-    return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
+    # the material's posterior with the map at its MAP, on the last pass's posterior
+    last = posterior(cfg.map_size, "colour" if colour else "grey")
+    posterior_of_material = laplace(last, psi, logits, np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3),
+                                    fit_chroma=colour)
+    material = Material.from_basis(model.basis, psi, chroma, name="recovered")
+    return Recovery(material=material.with_covariance(posterior_of_material.factor()), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
-                    seen=seen, log=rows)
+                    seen=seen, log=rows, laplace=posterior_of_material)
 
 
 def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> tuple:

@@ -25,7 +25,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior, angles_from_direction, direction_from_angles
-from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
+from mi_dsbrdf.inference.reflectance import image_chroma_logits, laplace, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 
 #: directions of the global search (Fibonacci lattice) and how many of them go on
@@ -196,5 +196,9 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     if point is not None:
         light["position"] = np.asarray(point[0]) + point[1] * direction
     chroma = softmax_chroma(logits)
-    return Recovery(material=Material.from_basis(model.basis, psi, chroma, name="recovered"), psi=psi,
-                    chromaticity=chroma, light=light, log=rows)
+    # the material's posterior with the light at its MAP
+    post.aim(theta, phi)
+    posterior_of_material = laplace(post, psi, logits, np.full((1, 3), np.exp(log_i)), fit_chroma=colour)
+    material = Material.from_basis(model.basis, psi, chroma, name="recovered")
+    return Recovery(material=material.with_covariance(posterior_of_material.factor()), psi=psi,
+                    chromaticity=chroma, light=light, log=rows, laplace=posterior_of_material)

@@ -13,11 +13,13 @@ if the full negative log posterior falls.
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 
 from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
-from mi_dsbrdf.brdf.dsbrdf import passed_through
+from mi_dsbrdf.brdf.curves import N_CONTROL
+from mi_dsbrdf.brdf.dsbrdf import LOBE_PARAMETERS, passed_through
 from mi_dsbrdf.lm import Damping, levenberg_marquardt
 
 #: bound of the chromaticity variables (softmax logits): c >= ~e^-6 / 2
@@ -78,6 +80,73 @@ def psi_jacobian(basis, psi, controls_jacobian) -> np.ndarray:
         (basis.n_bases,) + shape)
 
 
+def material_columns(post, jac, psi, logits, fit_chroma) -> list:
+    """d radiance / d (psi, chromaticity variables): [(k, 3, P)] + [(2R, 3, P)]
+    with ``fit_chroma``, from a :class:`~mi_dsbrdf.inference.lobes.LobeJacobian`."""
+    columns = [psi_jacobian(post.model.basis, psi, jac.controls)]
+    if fit_chroma:
+        R = logits.shape[0]
+        dc_dz = softmax_jacobian(softmax_chroma(logits))                         # (R, 3, 2)
+        # channel c depends on chromaticity (r, c) only
+        columns.append(np.einsum("rcp,rck->rkcp", jac.chromaticity, dc_dz).reshape(2 * R, 3, -1))
+    return columns
+
+
+def log_residuals(post, columns, image) -> tuple:
+    """(J / model (n, M), d (M,)) over the reflectance block's usable pixels,
+    channel-major: the Jacobian of the log pixel values (n variables) and the
+    residuals d = log(model + e) - log(observed + e) of Eq. 19."""
+    view = post.refl
+    keep = view.keep
+    J = columns[:, :, keep].reshape(columns.shape[0], -1)                    # (n, 3 x kept pixels)
+    mp = (np.maximum(image[keep], 0) + post.offset).T.reshape(-1)
+    d = np.log(mp) - np.log(np.maximum(view.observed[keep], 0) + post.offset).T.reshape(-1)
+    return J / mp, d
+
+
+def prior_derivatives(post, psi, logits, fit_chroma) -> list:
+    """[(gradient (n,), Gauss-Newton Hessian (n, n))] of each reflectance prior in
+    (psi, chromaticity variables if ``fit_chroma``): the GMM (Eq. 6, its most
+    responsible component), the curve penalty, and the hue and chromaticity
+    priors (gradient only; :func:`chroma_prior_hessian` gives their curvature).
+    Summed in this order by the caller."""
+    k, R = psi.size, logits.shape[0]
+    n = k + (2 * R if fit_chroma else 0)
+
+    def padded(g, h=None):
+        G, H = np.zeros(n), np.zeros((n, n))
+        G[:g.size] = g
+        if h is not None:
+            H[:k, :k] = h
+        return G, H
+    terms = []
+    if post.model.gmm is not None:
+        terms.append(padded(*post.gmm_prior(psi)[1:]))
+    terms.append(padded(*post.curve_penalty(psi)[1:]))
+    if fit_chroma:
+        terms.append(padded(np.concatenate([np.zeros(k), chroma_prior_gradient(post, logits)])))
+    return terms
+
+
+def chroma_prior_gradient(post, logits) -> np.ndarray:
+    """(2R,) d/d chromaticity variables of the weighted hue and chromaticity priors."""
+    c = softmax_chroma(logits)
+    return np.einsum("rl,rlk->rk", post.chroma_prior_grad(c), softmax_jacobian(c)).reshape(-1)
+
+
+def chroma_prior_hessian(post, logits, step=1e-4) -> np.ndarray:
+    """(2R, 2R) Hessian of the hue and chromaticity priors in the chromaticity
+    variables, by central differences of their gradient (symmetrised)."""
+    z = np.asarray(logits, dtype=np.float64).reshape(-1)
+    H = np.empty((z.size, z.size))
+    for i in range(z.size):
+        e = np.zeros(z.size)
+        e[i] = step
+        H[:, i] = (chroma_prior_gradient(post, (z + e).reshape(-1, 2))
+                   - chroma_prior_gradient(post, (z - e).reshape(-1, 2))) / (2 * step)
+    return 0.5 * (H + H.T)
+
+
 def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=None,
                       fit_chroma=True) -> ReflectanceStep:
     """Minimise the posterior over psi and the chromaticity variables at fixed light.
@@ -97,7 +166,6 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
     fit_chroma : the chromaticity variables are variables (else kept at ``logits``)
     """
     k, R = psi.size, logits.shape[0]
-    view = post.refl
     n_chroma = 2 * R if fit_chroma else 0
     n_scale = 1 if fit_scale else 0
     n_dir = 0 if direction is None else 2
@@ -123,15 +191,9 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
         material = post.material(p, z)
         aim(ang)
         jac = post.refl.lobes.jacobian(material, Ls)
-        image = jac.image
-        columns = [psi_jacobian(post.model.basis, p, jac.controls)]             # each (n, 3, P)
-        if fit_chroma:
-            c = softmax_chroma(z)
-            dc_dz = softmax_jacobian(c)                                          # (R, 3, 2)
-            # channel c depends on chromaticity (r, c) only
-            columns.append(np.einsum("rcp,rck->rkcp", jac.chromaticity, dc_dz).reshape(2 * R, 3, -1))
+        columns = material_columns(post, jac, p, z, fit_chroma)
         if fit_scale:
-            columns.append(image.T[None])
+            columns.append(jac.image.T[None])
         if ang is not None:
             for j in range(2):
                 e = np.zeros(2)
@@ -139,26 +201,17 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
                 hi, lo = [(aim(ang + sgn * e), post.refl.lobes.render(material, Ls))[1] for sgn in (1, -1)]
                 columns.append(((hi - lo) / (2 * DIRECTION_STEP)).T[None])
             aim(ang)
-        keep = view.keep
-        J = np.concatenate(columns, axis=0)[:, :, keep].reshape(len(x), -1)   # (n, 3 x kept pixels)
-        mp = (np.maximum(image[keep], 0) + post.offset).T.reshape(-1)         # channel-major like J
-        d = np.log(mp) - np.log(np.maximum(view.observed[keep], 0) + post.offset).T.reshape(-1)
-        Jd = J / mp
+        Jd, d = log_residuals(post, np.concatenate(columns, axis=0), jac.image)
         # IRLS weights of the Laplacian, graduated: while most residuals are large the
         # kink is widened to their median (least squares far away, L1 near the optimum)
         kink = max(post.kink, float(np.median(np.abs(d))))
-        w = view.weight / (np.sqrt(d * d + kink * kink) * post.scale)
+        w = post.refl.weight / (np.sqrt(d * d + kink * kink) * post.scale)
         H = (Jd * w) @ Jd.T
         g = Jd @ (w * d)
-        if post.model.gmm is not None:
-            _, g_gmm, h_gmm = post.gmm_prior(p)
-            H[:k, :k] += h_gmm
-            g[:k] += g_gmm
-        _, g_curve, h_curve = post.curve_penalty(p)
-        H[:k, :k] += h_curve
-        g[:k] += g_curve
-        if fit_chroma:
-            g[k:k + 2 * R] += np.einsum("rl,rlk->rk", post.chroma_prior_grad(c), dc_dz).reshape(-1)
+        n = k + n_chroma
+        for g_prior, H_prior in prior_derivatives(post, p, z, fit_chroma):
+            g[:n] += g_prior
+            H[:n, :n] += H_prior
         return g, H
 
     def propose(x, step):
@@ -177,3 +230,82 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
     p, z, sc, ang = unpack(res.x)
     aim(ang)
     return ReflectanceStep(p, z, L * np.exp(sc), None if ang is None else tuple(ang))
+
+
+@dataclasses.dataclass(frozen=True)
+class Laplace:
+    """The Laplace approximation of the posterior of the material at its MAP,
+    with the light held at its MAP (paper §4's posterior, not in the paper).
+
+    In the variables x = (psi (k,), chromaticity variables (R, 2) if they were
+    fitted): the negative log posterior's Hessian is ``likelihood`` + ``prior``;
+    ``to_parameters`` maps a change of x to the material's parameters
+    theta = (log kappa controls (R, 6), log gamma controls (R, 6), chromaticity
+    variables (R, 2)), flattened in that order (controls a clamp holds do not move).
+
+    Attributes
+    ----------
+    likelihood : (n, n) expected Hessian of Eq. 19 at the MAP: the Laplacian's
+        Fisher information with its scale from the residuals themselves
+    prior : (n, n) Hessian of the reflectance priors (GMM, curve penalty, and
+        the positive part of the hue and chromaticity priors')
+    to_parameters : (LOBE_PARAMETERS R, n)
+    seconds : the time it took
+    """
+    likelihood: np.ndarray
+    prior: np.ndarray
+    to_parameters: np.ndarray
+    seconds: float = 0.0
+
+    def factor(self, temperature=None) -> np.ndarray:
+        """(LOBE_PARAMETERS R, n) F with the parameters' covariance F F^T =
+        temperature x A (likelihood + prior)^-1 A^T, A = ``to_parameters``: the
+        posterior tempered, p^(1 / temperature) (default
+        :data:`POSTERIOR_TEMPERATURE`; neighbouring pixels' residuals are not
+        independent, and the priors' weights grow with the pixels). Eigenvalues of
+        the Hessian are floored at EIGEN_FLOOR times the largest."""
+        t = POSTERIOR_TEMPERATURE if temperature is None else float(temperature)
+        w, V = np.linalg.eigh(self.likelihood + self.prior)
+        w = np.maximum(w, EIGEN_FLOOR * max(float(w.max()), 1e-300))
+        return self.to_parameters @ (V * np.sqrt(t / w))
+
+
+#: the temperature of the material's posterior covariance (:meth:`Laplace.factor`);
+#: chosen on validation for the 90 % band's coverage of the truth
+POSTERIOR_TEMPERATURE = 1.0
+#: the smallest eigenvalue of the Hessian the covariance keeps, relative to the largest
+EIGEN_FLOOR = 1e-9
+
+
+def laplace(post, psi, logits, L, fit_chroma=True) -> Laplace:
+    """The :class:`Laplace` approximation at the MAP (psi (k,), chromaticity
+    variables (R, 2)) under the light L (T, 3) (the posterior's light direction
+    as set), over the reflectance block's pixels scaled to stand for all usable
+    ones. One Jacobian of the image (the cost of one Levenberg-Marquardt step).
+
+    Eq. 19's residuals d are Laplacian; at scale b (``post.scale``) its expected
+    Hessian is sum_i J_i J_i^T / (b b_hat), b_hat = mean |d| the residuals' own
+    scale (the Laplacian's density at zero is 1 / (2 b_hat))."""
+    t0 = time.perf_counter()
+    k, R = psi.size, logits.shape[0]
+    jac = post.refl.lobes.jacobian(post.material(psi, logits), L)
+    Jd, d = log_residuals(post, np.concatenate(material_columns(post, jac, psi, logits, fit_chroma), axis=0),
+                          jac.image)
+    b_hat = max(float(np.mean(np.abs(d))), post.kink)
+    likelihood = post.refl.weight * (Jd @ Jd.T) / (post.scale * b_hat)
+    prior = sum(h for _, h in prior_derivatives(post, psi, logits, fit_chroma))
+    if fit_chroma:
+        # the hue prior is not convex: its curvature enters where it is positive
+        w, V = np.linalg.eigh(chroma_prior_hessian(post, logits))
+        prior[k:, k:] += (V * np.maximum(w, 0.0)) @ V.T
+    basis = post.model.basis
+    ctrl = basis.control_values(psi)
+    free = np.stack(passed_through(ctrl[:, 0], ctrl[:, 1]), axis=1)             # (R, 2, 6)
+    moves = (basis.bases * free)                                                 # (k, R, 2, 6)
+    to_controls = np.concatenate([moves[:, :, 0].reshape(k, -1), moves[:, :, 1].reshape(k, -1)], axis=1).T
+    n = prior.shape[0]
+    to_parameters = np.zeros((LOBE_PARAMETERS * R, n))
+    to_parameters[:2 * N_CONTROL * R, :k] = to_controls
+    if fit_chroma:
+        to_parameters[2 * N_CONTROL * R:, k:] = np.eye(2 * R)
+    return Laplace(likelihood, prior, to_parameters, time.perf_counter() - t0)

@@ -25,6 +25,9 @@ class Recovery:
         W/sr (point), "position": (3,) (point)}; None for a map
     log : one dict per logged round: "pass", "round", "neg_log_posterior",
         the posterior's terms, "seconds"
+    laplace : the material's posterior at the MAP
+        (:class:`~mi_dsbrdf.inference.reflectance.Laplace`); ``material`` carries
+        its covariance (``Material.covariance_factor``)
     """
     material: Material
     psi: np.ndarray
@@ -33,6 +36,7 @@ class Recovery:
     seen: np.ndarray = None
     light: dict = None
     log: list = dataclasses.field(default_factory=list)
+    laplace: object = None
 
     @property
     def neg_log_posterior(self) -> float:

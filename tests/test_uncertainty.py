@@ -1,0 +1,100 @@
+"""The material's posterior (Laplace approximation at the MAP): its covariance,
+samples and bands, their files, and the band's score against a truth."""
+import numpy as np
+import pytest
+
+from mi_dsbrdf.brdf.dsbrdf import LOBE_PARAMETERS, Material
+from mi_dsbrdf.config import Config
+from mi_dsbrdf.errors import MaterialError
+from mi_dsbrdf.evaluation.metrics import band_scores
+from mi_dsbrdf.inference import recover_envmap
+from mi_dsbrdf.inference.objective import Posterior
+from mi_dsbrdf.inference.reflectance import laplace
+from mi_dsbrdf.model import model_file as model_data
+from mi_dsbrdf.model.samples import samples_from_function
+from test_inference import sky_case
+
+TRUTH = "gold-metallic-paint"
+
+
+@pytest.fixture(scope="module")
+def recovered():
+    model, ts, img = sky_case()
+    cfg = Config(map_size=(8, 16), max_rounds=2, block_iters=6, illumination_iters=20)
+    return model, ts, img, cfg, recover_envmap(ts, img, ts.mask, model, cfg)
+
+
+def test_a_recovered_material_carries_a_covariance_of_its_parameters(recovered, tmp_path):
+    """The recovery's material has a covariance factor over (log kappa, log gamma
+    controls, chromaticity variables); the covariance is symmetric positive
+    semi-definite; a higher temperature scales it; material.json keeps it."""
+    model, _, _, _, res = recovered
+    m = res.material
+    R = m.n_lobes
+    assert m.covariance_factor.shape == (LOBE_PARAMETERS * R, model.basis.n_bases + 2 * R)
+    C = m.covariance
+    assert np.allclose(C, C.T) and np.linalg.eigvalsh(C).min() > -1e-12 * np.abs(C).max()
+    assert np.allclose(res.laplace.factor(4.0), 2.0 * res.laplace.factor(1.0))
+    m.save(tmp_path / "m.json")
+    back = Material.load(tmp_path / "m.json")
+    assert np.allclose(back.covariance_factor, m.covariance_factor)
+    assert np.allclose(back.with_observed(None).covariance, C)        # carried through with_observed
+
+
+def test_samples_and_bands_come_from_the_covariance(recovered):
+    """Samples scatter around the MAP as the covariance says (parameters' sample
+    covariance), the 90 % band holds the MAP's values and widens with the
+    temperature; a material without a covariance says so in one line."""
+    _, _, _, _, res = recovered
+    m = res.material
+    draws = m.sample(400, seed=1)
+    theta = np.array([d.parameters() for d in draws])
+    free = np.diag(m.covariance) > 1e-10
+    sd = np.sqrt(np.diag(m.covariance))[free]
+    # unclamped parameters: sample mean within 4 standard errors, spread within 20 %
+    assert np.all(np.abs(theta.mean(axis=0)[free] - m.parameters()[free]) < 4 * sd / np.sqrt(400) + 1e-9)
+    assert np.allclose(theta.std(axis=0)[free], sd, rtol=0.2)
+    th, td = np.meshgrid(np.linspace(0, 1.5, 12), np.linspace(0, 1.5, 12))
+    lo, hi = m.band(th.ravel(), td.ravel())
+    value = m.eval(th.ravel(), td.ravel())
+    assert lo.shape == hi.shape == value.shape == (144, 3)
+    assert np.mean((lo <= value) & (value <= hi)) > 0.95
+    wide = m.with_covariance(res.laplace.factor(100.0)).band(th.ravel(), td.ravel())
+    assert np.median(np.log(wide[1] / wide[0])) > 3 * np.median(np.log(hi / lo))
+    with pytest.raises(MaterialError, match="no posterior covariance"):
+        model_data.shipped_model().library_material(TRUTH).band(th.ravel(), td.ravel())
+    with pytest.raises(MaterialError, match="covariance_factor"):
+        Material.from_dict({**m.to_dict(), "covariance_factor": [[1.0, 2.0]]})
+
+
+def test_the_likelihood_hessian_is_the_fisher_information_of_plain_differences(recovered):
+    """Plain reference: the Laplace likelihood Hessian equals weight J J^T / (b b_hat),
+    J the central differences of the log pixel values in psi, b_hat the mean |residual|."""
+    model, ts, img, cfg, res = recovered
+    post = Posterior(ts.with_map_size((8, 16)), img, ts.mask, model, cfg)
+    L = res.illumination.reshape(-1, 3) / 1.0
+    lp = laplace(post, res.psi, np.log(res.chromaticity[:, :2] / res.chromaticity[:, 2:]), L, fit_chroma=False)
+    view = post.refl
+
+    def log_image(psi):
+        image = view.lobes.render(post.material(psi, np.log(res.chromaticity[:, :2] / res.chromaticity[:, 2:])), L)
+        return np.log(np.maximum(image[view.keep], 0) + post.offset).T.reshape(-1)
+    k, h = res.psi.size, 3e-3       # the render is float32: a step well above its rounding
+    J = np.stack([(log_image(res.psi + h * e) - log_image(res.psi - h * e)) / (2 * h) for e in np.eye(k)])
+    d = log_image(res.psi) - np.log(np.maximum(view.observed[view.keep], 0) + post.offset).T.reshape(-1)
+    fisher = view.weight * (J @ J.T) / (post.scale * max(np.mean(np.abs(d)), post.kink))
+    assert np.linalg.norm(lp.likelihood - fisher) < 0.01 * np.linalg.norm(fisher)
+
+
+def test_band_scores_count_the_cells_whose_truth_lies_in_the_band():
+    """A narrow band holds a truth equal to the material's values in every cell and
+    a truth twice as bright in none; the scale divides the truth."""
+    m = model_data.shipped_model().library_material(TRUTH)
+    narrow = m.with_covariance(np.full((LOBE_PARAMETERS * m.n_lobes, 1), 1e-4))
+    samples = samples_from_function(lambda th, td, pd: m.eval(th, td))
+    where = samples.theta_d < 0.5
+    exact = band_scores(narrow, samples, where, 1.0, n=64)
+    assert exact["coverage_observed"] == exact["coverage_unobserved"] == 1.0
+    assert 0 < exact["width_observed"] < 0.01
+    assert band_scores(narrow, samples, where, 0.5, n=64)["coverage_observed"] == 0.0
+    assert np.isnan(band_scores(narrow, samples, np.ones(len(samples), bool), 1.0, n=8)["coverage_unobserved"])
