@@ -160,6 +160,12 @@ def test_point_light_and_envmap_scenes(tmp_path):
     k = TEXEL_BLOCK
     assert env.shape == (4 * k, 8 * k, 3) and np.isfinite(env).all() and np.all(env >= 0)
     assert np.array_equal(np.repeat(np.repeat(env[::k, ::k], k, 0), k, 1), env)          # constant blocks
+    # the map's posterior spread, laid out alike: positive where a texel is seen, 0 where not
+    std = np.array(mi.Bitmap(str(out / "illumination_std.exr")))
+    assert std.shape == env.shape and np.all((std > 0) == (env > 0))
+    saved = json.loads((out / "material.json").read_text())
+    from mi_dsbrdf.brdf.dsbrdf import LOBE_PARAMETERS
+    assert len(saved["covariance_factor"]) == LOBE_PARAMETERS * saved["lobes"]
     # the written scene loads (mesh path made absolute, the map beside it) and renders finite pixels
     assert str(tmp_path / "meshes" / "torus.ply") in (out / "scene.xml").read_text()
     rerender = np.array(mi.render(mi.load_file(str(out / "scene.xml")), spp=4))

@@ -98,3 +98,34 @@ def test_band_scores_count_the_cells_whose_truth_lies_in_the_band():
     assert 0 < exact["width_observed"] < 0.01
     assert band_scores(narrow, samples, where, 0.5, n=64)["coverage_observed"] == 0.0
     assert np.isnan(band_scores(narrow, samples, np.ones(len(samples), bool), 1.0, n=8)["coverage_unobserved"])
+
+
+def test_the_maps_spread_is_the_diagonal_of_plain_differences(recovered):
+    """Plain reference: the map's spread is (likelihood + gradient prior)^-1/2 on the
+    diagonal, the likelihood's part from central differences of the log pixels in
+    each texel's log value, the gradient prior's from its majoriser's quadratic of a
+    unit bump; texels no pixel sees are 0."""
+    from mi_dsbrdf.inference.envmap import illumination_spread
+    from mi_dsbrdf.inference.forward import apply_transport
+    model, ts, img, cfg, res = recovered
+    post = Posterior(ts.with_map_size((8, 16)), img, ts.mask, model, cfg)
+    log_map = np.log(np.where(res.seen[..., None], res.illumination / res.illumination[res.seen].mean(), 1.0))
+    T = post.transport(res.psi, np.log(res.chromaticity[:, :2] / res.chromaticity[:, 2:]))
+    spread = illumination_spread(post, log_map, T, res.seen)
+    assert spread.shape == log_map.shape and np.all(spread[~res.seen] == 0) and np.all(spread[res.seen] > 0)
+    keep = post.keep
+
+    def log_image(x):
+        image = apply_transport(T, np.where(res.seen[..., None], np.exp(x), 0.0).reshape(-1, 3))
+        return np.log(np.maximum(image[keep], 0) + post.offset)
+    d = log_image(log_map) - np.log(np.maximum(post.observed[keep], 0) + post.offset)
+    b_hat = max(np.mean(np.abs(d)), post.kink)
+    c = post.gradient.majoriser_weights(log_map)
+    for i, j in np.argwhere(res.seen)[::7]:
+        e = np.zeros_like(log_map)
+        e[i, j, 0] = 1e-3
+        J = (log_image(log_map + e)[:, 0] - log_image(log_map - e)[:, 0]) / 2e-3
+        dphi, dth, _ = post.gradient.differences(e / 1e-3)
+        prior = (c * (dphi[..., 0] ** 2 + dth[..., 0] ** 2)).sum()
+        plain = 1 / np.sqrt(post.weight * (J @ J) / (post.scale * b_hat) + prior)
+        assert spread[i, j, 0] == pytest.approx(plain, rel=0.02)

@@ -157,7 +157,8 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     used = grid.repeat(keep)
     log["residual"] = relative_residual(obs, rerender, used)
     return Result(material=material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
-                  image=obs, used=used, rerender=rerender, scene_source=source)
+                  image=obs, used=used, rerender=rerender, scene_source=source,
+                  illumination_std=rec.illumination_spread)
 
 
 def relative_residual(image, rerender, used, band=256) -> float:

@@ -7,6 +7,8 @@ and ``mi-dsbrdf recover``):
                         where the image looked in (theta_h, theta_d) (``Material.observed``)
     illumination.exr    lat-long map, Mitsuba envmap convention (unseen texels black), each
                         texel as an 8 x 8 block (latlong.TEXEL_BLOCK)                          (envmap scenes)
+    illumination_std.exr  the posterior's standard deviation of the map's natural log, per
+                        texel and channel, laid out as illumination.exr (unseen texels 0)      (envmap scenes)
     light.json          {"type", "direction": unit vector object -> light, "intensity"
                          (irradiance, or W/sr for a point light, which also has "position")}
     scene.xml           the input scene with the recovered material and light (when the
@@ -36,8 +38,8 @@ from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.inference.latlong import texel_blocks
 
 #: every file a result directory can hold (``--force`` replaces only such a folder)
-RESULT_FILES = ("material.json", "illumination.exr", "light.json", "scene.xml", "log.json", "input.png",
-                "rerender.png", "residual.png", "material.png", "illumination.png")
+RESULT_FILES = ("material.json", "illumination.exr", "illumination_std.exr", "light.json", "scene.xml", "log.json",
+                "input.png", "rerender.png", "residual.png", "material.png", "illumination.png")
 
 
 def stage_row(since) -> dict:
@@ -78,6 +80,8 @@ class Result:
         each block's value on its pixels that see the object)
     scene_source : the scene file (str) or dict it came from, rewritten into
         ``scene.xml`` by :meth:`save`; None for an ``mi.Scene``
+    illumination_std : (H, W, 3) float64, the posterior's standard deviation of
+        log ``illumination`` per texel (0 where no pixel sees), or None
     """
     material: Material
     light: dict
@@ -88,6 +92,7 @@ class Result:
     used: np.ndarray
     rerender: np.ndarray
     scene_source: object = None
+    illumination_std: np.ndarray = None
 
     @property
     def seconds(self) -> float:
@@ -115,6 +120,8 @@ class Result:
         self.material.save(material_file)
         if self.illumination is not None:
             write_exr(os.path.join(tmp, "illumination.exr"), texel_blocks(self.illumination))
+            if self.illumination_std is not None:
+                write_exr(os.path.join(tmp, "illumination_std.exr"), texel_blocks(self.illumination_std))
             illumination_preview(self.illumination, os.path.join(tmp, "illumination.png"), seen=self.seen)
             light = {"type": "envmap", "filename": os.path.join(out, "illumination.exr")}
         else:

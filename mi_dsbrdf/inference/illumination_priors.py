@@ -135,6 +135,19 @@ class GradientPrior:
         m2 = self._magnitude2(dphi, dth)
         return self.weight * self._curvature(m2, _texel_weights(*m2.shape))
 
+    def majoriser_diagonal(self, log_map) -> np.ndarray:
+        """(H, W) the diagonal of the majoriser's Hessian (:meth:`majoriser_weights`)
+        in each channel of each texel: a texel's value enters its own two
+        differences and its left and upper neighbours' ones."""
+        c = self.majoriser_weights(log_map)
+        _, _, inv_s = self.differences(log_map)
+        s2 = inv_s[:, :, 0] ** 2                                        # (H, 1)
+        below = np.ones((c.shape[0], 1))
+        below[-1] = 0.0                                                 # no d_theta past the last row
+        d = c * (s2 + below) + np.roll(c, 1, axis=1) * s2
+        d[1:] += c[:-1]
+        return d
+
     def __call__(self, log_map):
         dphi, dth, inv_s = self.differences(log_map)
         H_, W_, _ = dphi.shape

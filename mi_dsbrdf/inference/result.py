@@ -25,6 +25,9 @@ class Recovery:
         W/sr (point), "position": (3,) (point)}; None for a map
     log : one dict per logged round: "pass", "round", "neg_log_posterior",
         the posterior's terms, "seconds"
+    illumination_spread : (H, W, 3) the posterior's standard deviation of the
+        log map per texel (:func:`~mi_dsbrdf.inference.envmap.illumination_spread`;
+        0 where no pixel sees); None for a point or directional light
     laplace : the material's posterior at the MAP
         (:class:`~mi_dsbrdf.inference.reflectance.Laplace`); ``material`` carries
         its covariance (``Material.covariance_factor``)
@@ -37,6 +40,7 @@ class Recovery:
     light: dict = None
     log: list = dataclasses.field(default_factory=list)
     laplace: object = None
+    illumination_spread: np.ndarray = None
 
     @property
     def neg_log_posterior(self) -> float:
