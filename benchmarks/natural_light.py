@@ -233,14 +233,15 @@ def posterior_table(rows) -> str:
         return ""
     temps = sorted(rows[0]["posterior"]["temperature"], key=float)
     md = ["| temperature | coverage, observed | coverage, unobserved | width, observed | width, unobserved | "
-          "width observed / unobserved |", "|---|---|---|---|---|---|"]
+          "width observed / unobserved | map coverage |", "|---|---|---|---|---|---|---|"]
     for t in temps:
         b = [r["posterior"]["temperature"][t] for r in rows]
-        med = {k: float(np.nanmedian([x[k] for x in b])) for k in b[0]}
+        med = {k: float(np.nanmedian([x.get(k, np.nan) for x in b])) for k in b[0]}
         ratio = float(np.nanmedian([x["width_observed"] / x["width_unobserved"] for x in b]))
-        md.append("| %s%s | %.2f | %.2f | %.2f | %.2f | %.2f |" % (
+        md.append("| %s%s | %.2f | %.2f | %.2f | %.2f | %.2f | %s |" % (
             t, " (shipped)" if float(t) == rows[0]["posterior"]["default"] else "", med["coverage_observed"],
-            med["coverage_unobserved"], med["width_observed"], med["width_unobserved"], ratio))
+            med["coverage_unobserved"], med["width_observed"], med["width_unobserved"], ratio,
+            "%.2f" % med["map_coverage"] if "map_coverage" in med else "–"))
     share = np.median([r["posterior"]["seconds"] / r["seconds"] for r in rows])
     md += ["", "%d cases; the temperature whose median coverage on observed cells is nearest %.2f: %s. "
            "The Laplace approximation takes %.1f %% of a recovery's time (median)."

@@ -64,8 +64,8 @@ every method alike) and scores it:
 * ``posterior`` (this tool's answers): the material's posterior band
   (:func:`~mi_dsbrdf.evaluation.metrics.band_scores`: its coverage of the
   truth and its width, where the image looked and elsewhere) at each of
-  :data:`TEMPERATURES` and the shipped one, and the seconds the Laplace
-  approximation took;
+  :data:`TEMPERATURES` and the shipped one, with the map's (``map_coverage``,
+  :func:`map_coverage`; probes), and the seconds the Laplace approximation took;
 * ``terms``: the last logged round's negative log posterior term by term
   (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
@@ -265,7 +265,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
                     **weights})
     out = {"case": case, "specularity": specularity(name)}
     small = seen = None           # the truth map at the recovered resolution and its seen texels (probes)
-    laplace = None                # the material's posterior (this tool's answers)
+    laplace = spread = None       # the material's posterior, the map's spread (this tool's answers)
     t0 = time.perf_counter()
     if case["kind"] == "point":
         d_true = light_at(case["angle"])
@@ -322,6 +322,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         out["illumination_error"] = scale_invariant_log_error(recovered_map, small, seen)
         out["illumination_error_paper"] = scale_invariant_log_error(recovered_map, small, seen, "paper")
         out["seen_fraction"] = float(seen.mean())
+        if method == "dsbrdf":
+            spread = result.illumination_spread
         maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
     for c in CONVENTIONS:
         out["brdf_eq20_" + c], s = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)
@@ -331,11 +333,17 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     out.update(_observed_errors(values, samples, where))
     if laplace is not None:
         # the posterior band at each temperature, the shipped one among them
+        temperatures = sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE})
         bands = {"%g" % t: band_scores(material.with_covariance(laplace.factor(t)), samples, where, scale,
-                                       BAND_LEVEL)
-                 for t in sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE})}
+                                       BAND_LEVEL) for t in temperatures}
         out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "seconds": laplace.seconds,
                             "temperature": bands}
+        if spread is not None:
+            # the map's band: the truth map within the level's normal quantile of the spread
+            # (which scales as the square root of the temperature), after the best log scale
+            for t in temperatures:
+                bands["%g" % t]["map_coverage"] = map_coverage(
+                    recovered_map, small, seen, spread * math.sqrt(t / POSTERIOR_TEMPERATURE), BAND_LEVEL)
     if getattr(material, "psi", None) is not None:
         out["material"] = {"psi": material.psi.tolist(), "chromaticity": material.chromaticity.tolist()}
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
@@ -349,6 +357,15 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     out["finite"] = _finite(out)
     out["images"] = images
     return out
+
+
+def map_coverage(recovered, truth, seen, spread, level) -> float:
+    """The share of seen texel channels whose truth (H, W, 3) lies within the
+    normal ``level`` band of the recovered map's log, +- z ``spread`` (H, W, 3),
+    after the best log scale (the mean log ratio over the seen texels)."""
+    from scipy.stats import norm
+    r = np.log(np.maximum(truth[seen], 1e-30)) - np.log(np.maximum(recovered[seen], 1e-30))
+    return float(np.mean(np.abs(r - r.mean()) <= norm.ppf(0.5 + level / 2) * spread[seen]))
 
 
 def _observed(view, light, keep, samples) -> np.ndarray:
