@@ -49,9 +49,10 @@ exists (delete a setting's folder to run it again after a change of the code).
 
 The summary also scores this tool's posterior band (``posterior`` of
 :func:`~mi_dsbrdf.evaluation.experiment.run_case`) at each temperature, and names
-the one whose median coverage on observed cells lies nearest the middle of
-:data:`COVERAGE_TARGET` (on validation: the choice of
-``mi_dsbrdf.inference.reflectance.POSTERIOR_TEMPERATURE``).
+the ones whose median coverage (the material's on observed cells, the map's on
+seen texels) lies nearest the middle of :data:`COVERAGE_TARGET` (on validation:
+the choice of ``mi_dsbrdf.inference.reflectance.POSTERIOR_TEMPERATURE`` and
+``mi_dsbrdf.inference.envmap.MAP_TEMPERATURE``).
 """
 from __future__ import annotations
 
@@ -238,24 +239,30 @@ def posterior_table(rows) -> str:
         b = [r["posterior"]["temperature"][t] for r in rows]
         med = {k: float(np.nanmedian([x.get(k, np.nan) for x in b])) for k in b[0]}
         ratio = float(np.nanmedian([x["width_observed"] / x["width_unobserved"] for x in b]))
+        shipped = [name for name, key in (("material", "default"), ("map", "map_default"))
+                   if float(t) == rows[0]["posterior"].get(key)]
         md.append("| %s%s | %.2f | %.2f | %.2f | %.2f | %.2f | %s |" % (
-            t, " (shipped)" if float(t) == rows[0]["posterior"]["default"] else "", med["coverage_observed"],
+            t, " (shipped: %s)" % ", ".join(shipped) if shipped else "", med["coverage_observed"],
             med["coverage_unobserved"], med["width_observed"], med["width_unobserved"], ratio,
             "%.2f" % med["map_coverage"] if "map_coverage" in med else "–"))
     share = np.median([r["posterior"]["seconds"] / r["seconds"] for r in rows])
-    md += ["", "%d cases; the temperature whose median coverage on observed cells is nearest %.2f: %s. "
-           "The Laplace approximation takes %.1f %% of a recovery's time (median)."
-           % (len(rows), np.mean(COVERAGE_TARGET), choose_temperature(rows), 100 * share)]
+    md += ["", "%d cases; the temperature whose median coverage is nearest %.2f: %s for the material (observed "
+           "cells), %s for the map. The Laplace approximation takes %.1f %% of a recovery's time (median)."
+           % (len(rows), np.mean(COVERAGE_TARGET), choose_temperature(rows),
+              choose_temperature(rows, "map_coverage"), 100 * share)]
     return "\n".join(md)
 
 
-def choose_temperature(rows) -> str:
-    """The temperature (a key of ``posterior.temperature``) whose median coverage
-    on observed cells over ``rows`` lies nearest the middle of COVERAGE_TARGET."""
-    rows = posterior_rows(rows)
+def choose_temperature(rows, measure="coverage_observed") -> str:
+    """The temperature (a key of ``posterior.temperature``) whose median ``measure``
+    (the material's coverage on observed cells, or ``map_coverage``) over ``rows``
+    lies nearest the middle of COVERAGE_TARGET; "–" if no row has it."""
+    rows = [r for r in posterior_rows(rows) if all(measure in b for b in r["posterior"]["temperature"].values())]
+    if not rows:
+        return "–"
     middle = np.mean(COVERAGE_TARGET)
     return min(rows[0]["posterior"]["temperature"], key=lambda t: abs(float(np.nanmedian(
-        [r["posterior"]["temperature"][t]["coverage_observed"] for r in rows])) - middle))
+        [r["posterior"]["temperature"][t][measure] for r in rows])) - middle))
 
 
 # --- the light-colour prior's spreads (--light-colours) ---------------------------------------

@@ -89,7 +89,7 @@ from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, band_scores, bsdf_values,
                                           highlight_ratio, log_error_by_theta_d,
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
                                           scale_invariant_log_error, split_errors)
-from mi_dsbrdf.inference.envmap import recover_envmap
+from mi_dsbrdf.inference.envmap import MAP_TEMPERATURE, recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import read_image
 from mi_dsbrdf.inference.latlong import texel_blocks
@@ -106,7 +106,7 @@ from mi_dsbrdf.model.samples import samples_from_table
 #: (:meth:`~mi_dsbrdf.inference.reflectance.Laplace.factor`) it is scored at
 #: beside the shipped one
 BAND_LEVEL = 0.9
-TEMPERATURES = (100, 300, 1000, 2000, 4000, 10000)
+TEMPERATURES = (30, 100, 300, 1000, 2000, 4000, 10000, 30000)
 #: probes used for relighting (the first two that differ from the case's probe)
 RELIGHT_PROBES = ["probulator/pisa.hdr", "probulator/uffizi.hdr", "probulator/ennis.hdr"]
 #: point light of the point cases: distance from the object's centre, intensity (W/sr)
@@ -333,17 +333,17 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     out.update(_observed_errors(values, samples, where))
     if laplace is not None:
         # the posterior band at each temperature, the shipped one among them
-        temperatures = sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE})
+        temperatures = sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE, MAP_TEMPERATURE})
         bands = {"%g" % t: band_scores(material.with_covariance(laplace.factor(t)), samples, where, scale,
                                        BAND_LEVEL) for t in temperatures}
-        out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "seconds": laplace.seconds,
-                            "temperature": bands}
+        out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "map_default": MAP_TEMPERATURE,
+                            "seconds": laplace.seconds, "temperature": bands}
         if spread is not None:
             # the map's band: the truth map within the level's normal quantile of the spread
             # (which scales as the square root of the temperature), after the best log scale
             for t in temperatures:
                 bands["%g" % t]["map_coverage"] = map_coverage(
-                    recovered_map, small, seen, spread * math.sqrt(t / POSTERIOR_TEMPERATURE), BAND_LEVEL)
+                    recovered_map, small, seen, spread * math.sqrt(t / MAP_TEMPERATURE), BAND_LEVEL)
     if getattr(material, "psi", None) is not None:
         out["material"] = {"psi": material.psi.tolist(), "chromaticity": material.chromaticity.tolist()}
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)

@@ -62,8 +62,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum, apply_transport
 from mi_dsbrdf.inference.objective import Posterior
-from mi_dsbrdf.inference.reflectance import (POSTERIOR_TEMPERATURE, image_chroma_logits, laplace,
-                                             reflectance_block, reflectance_starts)
+from mi_dsbrdf.inference.reflectance import image_chroma_logits, laplace, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 from mi_dsbrdf.model.priors import LOG_CHROMA_BASIS
 
@@ -164,6 +163,11 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                     illumination_spread=illumination_spread(last, log_map, last.transport(psi, logits), seen))
 
 
+#: the temperature of the map's spread (:func:`illumination_spread`), chosen on
+#: validation for the 90 % band's coverage of the truth map
+MAP_TEMPERATURE = 1.0
+
+
 def illumination_spread(post, log_map, T, seen, temperature=None) -> np.ndarray:
     """(H, W, 3) the posterior's standard deviation of the log map (natural log
     units) per texel and channel, from the diagonal of the illumination block's
@@ -171,11 +175,11 @@ def illumination_spread(post, log_map, T, seen, temperature=None) -> np.ndarray:
     (Eq. 19's Laplacian at the residuals' own scale, as the material's
     :func:`~mi_dsbrdf.inference.reflectance.laplace`) plus the gradient prior's
     (Eq. 16, its majoriser's diagonal); the entropy prior (Eq. 13-15), not convex,
-    is left out. Tempered like the material's (default
-    :data:`~mi_dsbrdf.inference.reflectance.POSTERIOR_TEMPERATURE`). A diagonal
+    is left out. Tempered: the variance times ``temperature`` (default
+    :data:`MAP_TEMPERATURE`). A diagonal
     ignores the texels' correlations: it understates the spread where neighbours
     trade light. Texels no pixel sees are 0 (no estimate, as in the map)."""
-    t = POSTERIOR_TEMPERATURE if temperature is None else float(temperature)
+    t = MAP_TEMPERATURE if temperature is None else float(temperature)
     H, W = seen.shape
     L = np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3)
     image = apply_transport(T, L)
