@@ -20,6 +20,9 @@ def test_demo_recovers_and_reports_and_never_overwrites(tmp_path):
                 "illumination_paper_after_scale", "constant_map_cosine_after_scale", "constant_map_paper_after_scale",
                 "relit_log_rmse_after_scale", "mean_material_relit_log_rmse_after_scale"):
         assert math.isfinite(report[key]) and report[key] >= 0, key
+    # the posterior band: a share of the cells, and a width
+    assert 0 <= report["band_coverage_observed"] <= 1 and report["band_width_observed"] > 0
+    assert "posterior band holds the truth" in (out / "report.md").read_text()
     for f in ("report.md", "comparison.png", "observed.exr", "recovered/material.json",
               "recovered/illumination.exr", "recovered/scene.xml"):
         assert (out / f).stat().st_size > 0, f

@@ -27,7 +27,8 @@ from mi_dsbrdf.app.io import save_preview, staged_output, write_exr
 from mi_dsbrdf.app.recover import recover_files, resolve_config
 from mi_dsbrdf.app.scenes import camera
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.evaluation.metrics import material_errors, observed_errors, scale_invariant_log_error
+from mi_dsbrdf.evaluation.metrics import (band_scores, log_rmse_scale_invariant, material_errors, observed_errors,
+                                          scale_invariant_log_error)
 from mi_dsbrdf.inference.latlong import direction_to_uv, texel_solid_angles
 from mi_dsbrdf.model.model_file import shipped_model
 from mi_dsbrdf.model.samples import samples_from_function
@@ -171,6 +172,11 @@ def _run(out, material, res, config, spp) -> dict:
                                                                                seen, c) for c in ("cosine", "paper")},
               "relit_log_rmse_after_scale": scale_invariant_log_error(relit[1], relit[0], lit),
               "mean_material_relit_log_rmse_after_scale": scale_invariant_log_error(relit[2], relit[0], lit),
+              # the posterior's 90 % band against the truth (after Eq. 20's best scale)
+              **{"band_%s" % k: v for k, v in band_scores(
+                  found, samples, found.observed(samples.theta_h, samples.theta_d) > 0,
+                  log_rmse_scale_invariant(found.eval(samples.theta_h, samples.theta_d), samples.values,
+                                           samples.cos_i)[1]).items()},
               "unseen_texels": log.get("unseen_texels"), "rounds": len(log["rounds"]),
               "final_neg_log_posterior": log["rounds"][-1]["neg_log_posterior"]}
     with open(os.path.join(out, "report.json"), "w") as f:
@@ -209,6 +215,10 @@ matched: one image cannot fix it).*
 | same for a constant map | {constant_map_paper_after_scale:.3f} |
 | relit image log-RMSE after the best scale, recovered | {relit_log_rmse_after_scale:.3f} |
 | same for the model's mean material | {mean_material_relit_log_rmse_after_scale:.3f} |
+| the 90 % posterior band holds the truth: where the image looked / elsewhere | \
+{band_coverage_observed:.0%} / {band_coverage_unobserved:.0%} |
+| the band's median width in log(f + 1e-6): where the image looked / elsewhere | \
+{band_width_observed:.2f} / {band_width_unobserved:.2f} |
 | illumination texels no pixel sees (left black) | {unseen_texels} |
 | rounds / final negative log posterior | {rounds} / {final_neg_log_posterior:.4g} |
 
