@@ -247,7 +247,8 @@ def posterior_table(rows) -> str:
             "%.2f" % med["map_coverage"] if "map_coverage" in med else "–"))
     share = np.median([r["posterior"]["seconds"] / r["seconds"] for r in rows])
     md += ["", "%d cases; the temperature whose median coverage is nearest %.2f: %s for the material (observed "
-           "cells), %s for the map. The Laplace approximation takes %.1f %% of a recovery's time (median)."
+           "cells), %s for the map. The posterior (the material's and the map's) takes %.1f %% of a recovery's time "
+           "(median)."
            % (len(rows), np.mean(COVERAGE_TARGET), choose_temperature(rows),
               choose_temperature(rows, "map_coverage"), 100 * share)]
     return "\n".join(md)

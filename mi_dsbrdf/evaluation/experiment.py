@@ -65,7 +65,7 @@ every method alike) and scores it:
   (:func:`~mi_dsbrdf.evaluation.metrics.band_scores`: its coverage of the
   truth and its width, where the image looked and elsewhere) at each of
   :data:`TEMPERATURES` and the shipped one, with the map's (``map_coverage``,
-  :func:`map_coverage`; probes), and the seconds the Laplace approximation took;
+  :func:`map_coverage`; probes), and the seconds they took within the recovery's;
 * ``terms``: the last logged round's negative log posterior term by term
   (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
@@ -265,7 +265,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
                     **weights})
     out = {"case": case, "specularity": specularity(name)}
     small = seen = None           # the truth map at the recovered resolution and its seen texels (probes)
-    laplace = spread = None       # the material's posterior, the map's spread (this tool's answers)
+    # the material's posterior, the map's spread and their time (this tool's answers)
+    laplace = spread = posterior_seconds = None
     t0 = time.perf_counter()
     if case["kind"] == "point":
         d_true = light_at(case["angle"])
@@ -277,6 +278,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         result = recover_light(ts, img, keep, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
         material, rows, laplace = result.material, result.log, result.laplace
+        posterior_seconds = result.posterior_seconds
         values = material.eval(samples.theta_h, samples.theta_d)
         out["direction_error_deg"] = direction_error_deg(result.light["direction"], d_true)
         out["intensity_ratio"] = result.light["intensity"] / POINT_INTENSITY
@@ -308,7 +310,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
                             if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
                                      "gradient", "chromaticity", "light_colour")}
             material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
-            laplace = result.laplace
+            laplace, posterior_seconds = result.laplace, result.posterior_seconds
             values = material.eval(samples.theta_h, samples.theta_d)
         else:
             fit = adam_recover(img, keep, res, (H, W), method, model, spp=case.get("spp", 16),
@@ -337,7 +339,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         bands = {"%g" % t: band_scores(material.with_covariance(laplace.factor(t)), samples, where, scale,
                                        BAND_LEVEL) for t in temperatures}
         out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "map_default": MAP_TEMPERATURE,
-                            "seconds": laplace.seconds, "temperature": bands}
+                            "seconds": posterior_seconds, "temperature": bands}
         if spread is not None:
             # the map's band: the truth map within the level's normal quantile of the spread
             # (which scales as the square root of the temperature), after the best log scale

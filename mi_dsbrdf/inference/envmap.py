@@ -153,14 +153,16 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     psi, logits, log_map, seen, _ = end
     chroma = softmax_chroma(logits)
     # the material's posterior with the map at its MAP, on the last pass's posterior
+    t_posterior = time.perf_counter()
     last = posterior(cfg.map_size, "colour" if colour else "grey")
     posterior_of_material = laplace(last, psi, logits, np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3),
                                     fit_chroma=colour)
+    spread = illumination_spread(last, log_map, last.transport(psi, logits), seen)
     material = Material.from_basis(model.basis, psi, chroma, name="recovered")
     return Recovery(material=material.with_covariance(posterior_of_material.factor()), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
-                    seen=seen, log=rows, laplace=posterior_of_material,
-                    illumination_spread=illumination_spread(last, log_map, last.transport(psi, logits), seen))
+                    seen=seen, log=rows, laplace=posterior_of_material, illumination_spread=spread,
+                    posterior_seconds=time.perf_counter() - t_posterior)
 
 
 #: the temperature of the map's spread (:func:`illumination_spread`), chosen on

@@ -197,8 +197,10 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         light["position"] = np.asarray(point[0]) + point[1] * direction
     chroma = softmax_chroma(logits)
     # the material's posterior with the light at its MAP
+    t_posterior = time.perf_counter()
     post.aim(theta, phi)
     posterior_of_material = laplace(post, psi, logits, np.full((1, 3), np.exp(log_i)), fit_chroma=colour)
     material = Material.from_basis(model.basis, psi, chroma, name="recovered")
     return Recovery(material=material.with_covariance(posterior_of_material.factor()), psi=psi,
-                    chromaticity=chroma, light=light, log=rows, laplace=posterior_of_material)
+                    chromaticity=chroma, light=light, log=rows, laplace=posterior_of_material,
+                    posterior_seconds=time.perf_counter() - t_posterior)

@@ -28,6 +28,8 @@ class Recovery:
     illumination_spread : (H, W, 3) the posterior's standard deviation of the
         log map per texel (:func:`~mi_dsbrdf.inference.envmap.illumination_spread`;
         0 where no pixel sees); None for a point or directional light
+    posterior_seconds : the time the material's posterior and the map's spread took
+        (within the recovery's)
     laplace : the material's posterior at the MAP
         (:class:`~mi_dsbrdf.inference.reflectance.Laplace`); ``material`` carries
         its covariance (``Material.covariance_factor``)
@@ -41,6 +43,7 @@ class Recovery:
     log: list = dataclasses.field(default_factory=list)
     laplace: object = None
     illumination_spread: np.ndarray = None
+    posterior_seconds: float = 0.0
 
     @property
     def neg_log_posterior(self) -> float:
