@@ -176,8 +176,10 @@ def cmd_batch(args):
 
 def cmd_relight(args):
     r = relight(args.material, args.out, envmap=args.envmap, shape=args.shape, scene=args.scene,
-                shape_id=args.shape_id, res=args.res, spp=args.spp, force=args.force)
+                shape_id=args.shape_id, res=args.res, spp=args.spp, force=args.force, samples=args.samples)
     print("relit in %.1f s -> %s, %s" % (r["seconds"], r["exr"], r["png"]))
+    if "std_exr" in r:
+        print("the posterior's spread over %d samples -> %s, %s" % (args.samples, r["std_exr"], r["std_png"]))
 
 
 def _config_arguments(p, preset):
@@ -290,6 +292,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output EXR (a PNG is written beside it)")
     p.add_argument("--res", type=int, default=256, help="with --envmap: image size")
     p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--samples", type=int, default=0, metavar="N",
+                   help="also render N materials drawn from a recovered material's posterior, and write their "
+                        "per-pixel standard deviation as <out>_std.exr (and .png)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.set_defaults(func=cmd_relight)
     return ap

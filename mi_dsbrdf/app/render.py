@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import tempfile
 import time
 
 import mitsuba as mi
@@ -84,25 +85,36 @@ def write_files(img, exr, force=False) -> str:
 
 
 def relight(material, out_file, envmap=None, shape="sphere", scene=None, shape_id=None, res=256, spp=64,
-            force=False) -> dict:
+            force=False, samples=0) -> dict:
     """Render a recovered (or library) material and write ``out_file`` (EXR) and a PNG beside it.
 
     Either on ``shape`` (``sphere``, ``torus`` or a .ply/.obj mesh) under the
     lat-long map ``envmap`` with Mitsuba's path tracer (a ``res`` x ``res`` film),
     or in the user's own ``scene`` XML with the material on its shape of id
     ``shape_id`` (its camera, film, integrator and lights as written; ``res`` is
-    not used). ``material``: a material.json or a library name. Both files
-    appear only when the render succeeded.
+    not used). ``material``: a material.json or a library name. With ``samples``
+    N > 0 (a recovered material, which carries its posterior), also N renders of
+    posterior materials (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.sample`), and
+    their per-pixel standard deviation written as ``<out>_std.exr`` and a PNG
+    beside it. The files appear only when every render succeeded.
     """
     check_exr_name(out_file)
     bsdf = material_dict(material)
     spp = _positive(spp, "spp")
+    if samples:
+        samples = _positive(samples, "samples")
+        if not os.path.exists(os.fspath(material)):
+            raise InputError("--samples needs a recovered material.json, which carries its posterior; %s is a "
+                             "library material" % os.fspath(material))
+        draws = Material.load(material).sample(samples)
     if scene is not None:
         if envmap is not None:
             raise InputError("give an envmap or a scene, not both: the scene brings its own lights")
         if shape_id is None:
             raise InputError("a scene needs --shape-id: the id of the shape that gets the material")
-        mi_scene = scene_with_material(scene, shape_id, bsdf)
+
+        def scene_of(b):
+            return scene_with_material(scene, shape_id, b)
     else:
         if envmap is None:
             raise InputError("give an envmap (a lat-long HDR/EXR map) or a scene to relight in")
@@ -111,21 +123,45 @@ def relight(material, out_file, envmap=None, shape="sphere", scene=None, shape_i
                              "(sphere, torus or a mesh file)")
         res = _positive(res, "res")
         check_envmap(envmap)
-        mi_scene = mi.load_dict({
-            "type": "scene", "integrator": {"type": "path", "max_depth": 4},
-            "sensor": camera(res, 32, box_filter=False),
-            "object": shape_dict(shape, bsdf), "emitter": {"type": "envmap",
+
+        def scene_of(b):
+            return mi.load_dict({
+                "type": "scene", "integrator": {"type": "path", "max_depth": 4},
+                "sensor": camera(res, 32, box_filter=False),
+                "object": shape_dict(shape, b), "emitter": {"type": "envmap",
                                                            "filename": os.path.abspath(os.fspath(envmap))}})
-    for f in (out_file, os.path.splitext(os.fspath(out_file))[0] + ".png"):
-        staged_file(f, force)           # checked before the render
+    std_file = os.path.splitext(os.fspath(out_file))[0] + "_std.exr"
+    for f in (out_file, std_file) if samples else (out_file,):
+        for g in (f, os.path.splitext(f)[0] + ".png"):
+            staged_file(g, force)           # checked before the render
     t0 = time.perf_counter()
-    img = np.array(mi.render(mi_scene, spp=spp), dtype=np.float32)
+    img = _render_finite(scene_of(bsdf), spp)
+    std = None
+    if samples:
+        # the posterior's spread: every sample rendered with its own material file and
+        # the same seed, so that the spread is the material's, not Monte Carlo noise
+        with tempfile.TemporaryDirectory() as tmp:
+            renders = []
+            for i, m in enumerate(draws):
+                path = os.path.join(tmp, "sample%d.json" % i)
+                m.save(path)
+                renders.append(_render_finite(scene_of({"type": "dsbrdf", "filename": path}), spp))
+        std = np.std(np.stack(renders), axis=0).astype(np.float32)
+    seconds = time.perf_counter() - t0
+    png = write_files(img, out_file, force)
+    out = {"exr": os.fspath(out_file), "png": png, "seconds": seconds}
+    if std is not None:
+        out.update(std_exr=std_file, std_png=write_files(std, std_file, force))
+    return out
+
+
+def _render_finite(scene, spp) -> np.ndarray:
+    """Mitsuba's render (seed 0) as float32 (InputError if any pixel is not finite)."""
+    img = np.array(mi.render(scene, spp=spp), dtype=np.float32)
     if not np.all(np.isfinite(img)):
         raise InputError("relighting produced non-finite pixels: the material or the map holds values "
                          "too large to render")
-    seconds = time.perf_counter() - t0
-    png = write_files(img, out_file, force)
-    return {"exr": os.fspath(out_file), "png": png, "seconds": seconds}
+    return img
 
 
 def check_exr_name(out_file) -> None:
