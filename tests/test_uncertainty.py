@@ -46,7 +46,8 @@ def test_samples_and_bands_come_from_the_covariance(recovered):
     covariance), the 90 % band holds the MAP's values and widens with the
     temperature; a material without a covariance says so in one line."""
     _, _, _, _, res = recovered
-    m = res.material
+    assert np.allclose(res.material.covariance_factor, res.laplace.factor())     # the shipped temperature
+    m = res.material.with_covariance(res.laplace.factor(1.0))        # untempered: narrow, no clamp reached
     draws = m.sample(400, seed=1)
     theta = np.array([d.parameters() for d in draws])
     free = np.diag(m.covariance) > 1e-10
@@ -105,13 +106,14 @@ def test_the_maps_spread_is_the_diagonal_of_plain_differences(recovered):
     diagonal, the likelihood's part from central differences of the log pixels in
     each texel's log value, the gradient prior's from its majoriser's quadratic of a
     unit bump; texels no pixel sees are 0."""
-    from mi_dsbrdf.inference.envmap import illumination_spread
+    from mi_dsbrdf.inference.envmap import MAP_TEMPERATURE, illumination_spread
     from mi_dsbrdf.inference.forward import apply_transport
     model, ts, img, cfg, res = recovered
     post = Posterior(ts.with_map_size((8, 16)), img, ts.mask, model, cfg)
     log_map = np.log(np.where(res.seen[..., None], res.illumination / res.illumination[res.seen].mean(), 1.0))
     T = post.transport(res.psi, np.log(res.chromaticity[:, :2] / res.chromaticity[:, 2:]))
-    spread = illumination_spread(post, log_map, T, res.seen)
+    spread = illumination_spread(post, log_map, T, res.seen, temperature=1.0)
+    assert np.allclose(illumination_spread(post, log_map, T, res.seen), spread * np.sqrt(MAP_TEMPERATURE))
     assert spread.shape == log_map.shape and np.all(spread[~res.seen] == 0) and np.all(spread[res.seen] > 0)
     keep = post.keep
 

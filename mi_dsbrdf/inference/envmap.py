@@ -167,7 +167,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
 
 #: the temperature of the map's spread (:func:`illumination_spread`), chosen on
 #: validation for the 90 % band's coverage of the truth map
-MAP_TEMPERATURE = 1.0
+MAP_TEMPERATURE = 300.0
 
 
 def illumination_spread(post, log_map, T, seen, temperature=None) -> np.ndarray:

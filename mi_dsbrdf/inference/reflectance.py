@@ -272,7 +272,7 @@ class Laplace:
 
 #: the temperature of the material's posterior covariance (:meth:`Laplace.factor`);
 #: chosen on validation for the 90 % band's coverage of the truth
-POSTERIOR_TEMPERATURE = 1.0
+POSTERIOR_TEMPERATURE = 4000.0
 #: the smallest eigenvalue of the Hessian the covariance keeps, relative to the largest
 EIGEN_FLOOR = 1e-9
 
