@@ -131,3 +131,18 @@ def test_the_maps_spread_is_the_diagonal_of_plain_differences(recovered):
         prior = (c * (dphi[..., 0] ** 2 + dth[..., 0] ** 2)).sum()
         plain = 1 / np.sqrt(post.weight * (J @ J) / (post.scale * b_hat) + prior)
         assert spread[i, j, 0] == pytest.approx(plain, rel=0.02)
+
+
+def test_material_png_draws_the_brdf_with_its_band_where_the_material_has_one(recovered, tmp_path):
+    """brdf_slices draws a recovered material (band, unseen directions) and a library
+    material (neither) alike, as a PNG of the figure's size."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.app.outputs import brdf_slices
+    from mi_dsbrdf.brdf.observed import DirectionWeights
+    res = recovered[-1]
+    seen = DirectionWeights(np.pad(np.ones((10, 45)), ((0, 35), (0, 0))))      # theta_h below ~14 deg seen
+    for name, m in (("recovered", res.material.with_observed(seen)),
+                    ("library", model_data.shipped_model().library_material(TRUTH))):
+        brdf_slices(m, tmp_path / ("%s.png" % name))
+        assert np.array(mi.Bitmap(str(tmp_path / ("%s.png" % name)))).shape[:2] == (320, 900)

@@ -16,6 +16,7 @@ import numpy as np
 
 from mi_dsbrdf.app.io import save_preview
 from mi_dsbrdf.app.scenes import camera
+from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.inference.latlong import procedural_sky
 
 
@@ -100,9 +101,11 @@ def _restore_ids(xml_file) -> None:
 
 
 def material_preview(material_file, path, res=96, spp=64) -> None:
-    """PNG of the material on three spheres (Mitsuba, ``direct`` integrator): lit
+    """PNG of the material: on three spheres (Mitsuba, ``direct`` integrator) lit
     from the upper left, from the side (grazing angles) and by the shipped
-    procedural sky."""
+    procedural sky; below them, with matplotlib, its BRDF against theta_h at
+    three theta_d (:func:`brdf_slices`), with the posterior's 90 % band and the
+    directions the image did not see shaded, when the material records them."""
     lights = [{"type": "directional", "direction": [0.5, -0.6, -0.62], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "directional", "direction": [-1.0, -0.3, 0.1], "irradiance": {"type": "rgb", "value": 2.0}},
               {"type": "envmap", "bitmap": mi.Bitmap(procedural_sky(64, 128))}]
@@ -114,7 +117,64 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
             "object": {"type": "sphere", "bsdf": {"type": "dsbrdf", "filename": os.path.abspath(material_file)}},
             "light": light})
         tiles.append(np.array(mi.render(scene, spp=spp, seed=0), dtype=np.float32))
-    save_preview(np.concatenate(tiles, axis=1), path)
+    spheres = np.concatenate(tiles, axis=1)
+    srgb = np.array(mi.Bitmap(np.ascontiguousarray(spheres), mi.Bitmap.PixelFormat.RGB).convert(
+        mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True))
+    brdf_slices(Material.load(material_file), path, srgb)
+
+
+#: the theta_d (degrees) of the BRDF slices in material.png
+SLICE_THETA_D = (10.0, 45.0, 75.0)
+
+
+def brdf_slices(material, path, top=None, level=0.9, n=128) -> None:
+    """PNG: the material's BRDF (the mean of its channels, 1/sr, log scale)
+    against theta_h at each of SLICE_THETA_D, with the ``level`` band of ``n``
+    posterior samples (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.sample`) if the
+    material has a covariance, and grey where the image it was recovered from did
+    not look (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.observed` is 0); ``top``, an
+    (h, w, 3) uint8 picture, above the plots. Hand-made plots are not worth it:
+    matplotlib draws them."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    theta_h = np.radians(np.linspace(0.0, 90.0, 181) ** 2 / 90.0)          # dense near the highlight
+    draws = material.sample(n) if material.covariance_factor is not None else []
+    rows = 2 if top is not None else 1
+    fig = plt.figure(figsize=(9.0, 3.2 * rows), dpi=100)
+    if top is not None:
+        ax = fig.add_subplot(rows, 1, 1)
+        ax.imshow(top)
+        ax.set_axis_off()
+    for i, td_deg in enumerate(SLICE_THETA_D):
+        ax = fig.add_subplot(rows, 3, 3 * (rows - 1) + i + 1)
+        td = np.full_like(theta_h, np.radians(td_deg))
+        x = np.degrees(theta_h)
+        seen = material.observed(theta_h, td)
+        if seen is not None:
+            ax.fill_between(x, 0, 1, where=seen <= 0, color="0.88", step="mid", transform=ax.get_xaxis_transform(),
+                            label="not seen by the image")
+        if draws:
+            values = np.stack([m.eval(theta_h, td).mean(axis=1) for m in draws])
+            lo, hi = np.quantile(values, [(1 - level) / 2, (1 + level) / 2], axis=0)
+            ax.fill_between(x, np.maximum(lo, 1e-6), np.maximum(hi, 1e-6), color="tab:blue", alpha=0.3,
+                            label="%d %% posterior band" % round(100 * level))
+        value = np.maximum(material.eval(theta_h, td).mean(axis=1), 1e-6)
+        ax.plot(x, value, color="tab:blue", label="recovered")
+        ax.set_yscale("log")
+        # two decades either side of the answer: a band's tail (kappa at its bound) would flatten it
+        ax.set_ylim(max(value.min() / 100, 1e-6), value.max() * 100)
+        ax.set_xscale("function", functions=(np.sqrt, np.square))
+        ax.set_xlim(0, 90)
+        ax.set_xticks([0, 5, 20, 45, 90])
+        ax.set_title("θd = %g°" % td_deg, fontsize=10)
+        ax.set_xlabel("θh (degrees)")
+        if i == 0:
+            ax.set_ylabel("BRDF (1/sr), mean of RGB")
+            ax.legend(fontsize=7, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(os.fspath(path))
+    plt.close(fig)
 
 
 def illumination_preview(log_map_or_map, path, seen=None, scale=8) -> None:
