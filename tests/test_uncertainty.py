@@ -31,7 +31,9 @@ def test_a_recovered_material_carries_a_covariance_of_its_parameters(recovered, 
     model, _, _, _, res = recovered
     m = res.material
     R = m.n_lobes
-    assert m.covariance_factor.shape == (LOBE_PARAMETERS * R, model.basis.n_bases + 2 * R)
+    # a column per variable, and one per other mode the search found (here the second route's answer)
+    assert len(res.laplace.alternatives) == 1 and res.laplace.alternatives[0][1] >= 0
+    assert m.covariance_factor.shape == (LOBE_PARAMETERS * R, model.basis.n_bases + 2 * R + 1)
     C = m.covariance
     assert np.allclose(C, C.T) and np.linalg.eigvalsh(C).min() > -1e-12 * np.abs(C).max()
     assert np.allclose(res.laplace.factor(4.0), 2.0 * res.laplace.factor(1.0))
@@ -146,3 +148,16 @@ def test_material_png_draws_the_brdf_with_its_band_where_the_material_has_one(re
                     ("library", model_data.shipped_model().library_material(TRUTH))):
         brdf_slices(m, tmp_path / ("%s.png" % name))
         assert np.array(mi.Bitmap(str(tmp_path / ("%s.png" % name)))).shape[:2] == (320, 900)
+
+
+def test_other_modes_widen_the_covariance_by_their_tempered_weight(recovered):
+    """A mode found besides the MAP adds its offset's outer product, weighted by the
+    tempered posterior exp(-energy / t) / (1 + exp(-energy / t)), to the covariance:
+    nothing at a high energy, half of it at zero."""
+    import dataclasses
+    lp = recovered[-1].laplace
+    delta = np.linspace(-1.0, 1.0, lp.to_parameters.shape[0])
+    base = lp.factor(10.0) @ lp.factor(10.0).T
+    for energy, weight in ((0.0, 0.5), (10.0, np.exp(-1) / (1 + np.exp(-1))), (1e4, 0.0)):
+        F = dataclasses.replace(lp, alternatives=((delta, energy),)).factor(10.0)
+        assert np.allclose(F @ F.T, base + weight * np.outer(delta, delta))

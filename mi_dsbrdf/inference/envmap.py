@@ -50,6 +50,7 @@ only if the posterior falls.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -139,6 +140,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # posterior and has no grey pass; the lower posterior of the two (the same
     # posterior: both end in the colour pass) is the answer
     second = colour and cfg.second_route_highlight is not None
+    loser = None
     if second and Material.from_basis(model.basis, end[0], softmax_chroma(end[1])).highlight_ratio() \
             > cfg.second_route_highlight:
         first_last = rows[-1]
@@ -149,7 +151,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         # (Recovery.neg_log_posterior) whichever route it came from
         log({**{k: v for k, v in (rows[-1] if won else first_last).items() if k not in ("route", "seconds")},
              "pass": "answer", "answer_route": won})
-        end = (end, other)[won]
+        end, loser = (end, other)[won], (end, other)[1 - won]
     psi, logits, log_map, seen, _ = end
     chroma = softmax_chroma(logits)
     # the material's posterior with the map at its MAP, on the last pass's posterior
@@ -157,8 +159,13 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     last = posterior(cfg.map_size, "colour" if colour else "grey")
     posterior_of_material = laplace(last, psi, logits, np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3),
                                     fit_chroma=colour)
-    spread = illumination_spread(last, log_map, last.transport(psi, logits), seen)
     material = Material.from_basis(model.basis, psi, chroma, name="recovered")
+    if loser is not None:
+        # the other route's answer: a second mode of the same posterior
+        other_material = Material.from_basis(model.basis, loser[0], softmax_chroma(loser[1]))
+        posterior_of_material = dataclasses.replace(posterior_of_material, alternatives=(
+            (other_material.parameters() - material.parameters(), float(loser[4] - end[4])),))
+    spread = illumination_spread(last, log_map, last.transport(psi, logits), seen)
     return Recovery(material=material.with_covariance(posterior_of_material.factor()), psi=psi,
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
                     seen=seen, log=rows, laplace=posterior_of_material, illumination_spread=spread,

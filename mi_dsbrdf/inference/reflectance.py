@@ -13,6 +13,7 @@ if the full negative log posterior falls.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import numpy as np
@@ -251,23 +252,37 @@ class Laplace:
         the positive part of the hue and chromaticity priors')
     to_parameters : (LOBE_PARAMETERS R, n)
     seconds : the time it took
+    alternatives : ((delta (LOBE_PARAMETERS R,), energy), ...): other modes the
+        search found, as their parameters less the MAP's and their negative log
+        posterior above the MAP's (>= 0)
     """
     likelihood: np.ndarray
     prior: np.ndarray
     to_parameters: np.ndarray
     seconds: float = 0.0
+    alternatives: tuple = ()
 
     def factor(self, temperature=None) -> np.ndarray:
         """(LOBE_PARAMETERS R, n) F with the parameters' covariance F F^T =
         temperature x A (likelihood + prior)^-1 A^T, A = ``to_parameters``: the
         posterior tempered, p^(1 / temperature) (default
         :data:`POSTERIOR_TEMPERATURE`; neighbouring pixels' residuals are not
-        independent, and the priors' weights grow with the pixels). Eigenvalues of
-        the Hessian are floored at EIGEN_FLOOR times the largest."""
+        independent, and the priors' weights grow with the pixels), plus one
+        column a mode in ``alternatives`` (F has n + their number columns).
+        Eigenvalues of the Hessian are floored at EIGEN_FLOOR times the largest."""
         t = POSTERIOR_TEMPERATURE if temperature is None else float(temperature)
         w, V = np.linalg.eigh(self.likelihood + self.prior)
         w = np.maximum(w, EIGEN_FLOOR * max(float(w.max()), 1e-300))
-        return self.to_parameters @ (V * np.sqrt(t / w))
+        F = self.to_parameters @ (V * np.sqrt(t / w))
+        if not self.alternatives:
+            return F
+        # other modes: a mixture of the MAP's Gaussian moved to each mode, weighted by the
+        # tempered posterior exp(-energy / t), matched in its second moment about the MAP
+        # (the MAP's covariance plus each offset's outer product times its weight)
+        p = np.array([math.exp(-max(e, 0.0) / t) for _, e in self.alternatives])
+        weights = p / (1.0 + p.sum())
+        return np.concatenate([F] + [np.sqrt(wt) * np.asarray(d, dtype=np.float64)[:, None]
+                                     for wt, (d, _) in zip(weights, self.alternatives)], axis=1)
 
 
 #: the temperature of the material's posterior covariance (:meth:`Laplace.factor`);
