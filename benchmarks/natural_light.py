@@ -51,8 +51,8 @@ The summary also scores this tool's posterior band (``posterior`` of
 :func:`~mi_dsbrdf.evaluation.experiment.run_case`) at each temperature, and names
 the ones whose median coverage (the material's on observed cells, the map's on
 seen texels) lies nearest the middle of :data:`COVERAGE_TARGET` (on validation:
-the choice of ``mi_dsbrdf.inference.reflectance.POSTERIOR_TEMPERATURE`` and
-``mi_dsbrdf.inference.envmap.MAP_TEMPERATURE``).
+the choice of ``mi_dsbrdf.inference.uncertainty.POSTERIOR_TEMPERATURE`` and
+``MAP_TEMPERATURE``).
 """
 from __future__ import annotations
 

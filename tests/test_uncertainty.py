@@ -9,7 +9,7 @@ from mi_dsbrdf.errors import MaterialError
 from mi_dsbrdf.evaluation.metrics import band_scores
 from mi_dsbrdf.inference import recover_envmap
 from mi_dsbrdf.inference.objective import Posterior
-from mi_dsbrdf.inference.reflectance import laplace
+from mi_dsbrdf.inference.uncertainty import laplace
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.samples import samples_from_function
 from test_inference import sky_case
@@ -108,7 +108,7 @@ def test_the_maps_spread_is_the_diagonal_of_plain_differences(recovered):
     diagonal, the likelihood's part from central differences of the log pixels in
     each texel's log value, the gradient prior's from its majoriser's quadratic of a
     unit bump; texels no pixel sees are 0."""
-    from mi_dsbrdf.inference.envmap import MAP_TEMPERATURE, illumination_spread
+    from mi_dsbrdf.inference.uncertainty import MAP_TEMPERATURE, illumination_spread
     from mi_dsbrdf.inference.forward import apply_transport
     model, ts, img, cfg, res = recovered
     post = Posterior(ts.with_map_size((8, 16)), img, ts.mask, model, cfg)

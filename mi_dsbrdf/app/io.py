@@ -294,8 +294,13 @@ def write_exr(path, image) -> None:
     mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), mi.Bitmap.PixelFormat.RGB).write(os.fspath(path))
 
 
+def srgb_bitmap(image, exposure=0.0) -> "mi.Bitmap":
+    """8-bit sRGB bitmap of a linear HDR image (H, W, 3) (scaled by 2^exposure, clipped)."""
+    img = np.ascontiguousarray(np.asarray(image, dtype=np.float32) * 2.0 ** exposure)
+    return mi.Bitmap(img, mi.Bitmap.PixelFormat.RGB).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8,
+                                                              srgb_gamma=True)
+
+
 def save_preview(image, path, exposure=0.0) -> None:
     """sRGB PNG of a linear HDR image (scaled by 2^exposure, clipped)."""
-    img = np.ascontiguousarray(np.asarray(image, dtype=np.float32) * 2.0 ** exposure)
-    bmp = mi.Bitmap(img, mi.Bitmap.PixelFormat.RGB)
-    bmp.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(os.fspath(path))
+    srgb_bitmap(image, exposure).write(os.fspath(path))

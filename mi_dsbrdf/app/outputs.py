@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.app.io import save_preview
+from mi_dsbrdf.app.io import save_preview, srgb_bitmap
 from mi_dsbrdf.app.scenes import camera
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.inference.latlong import procedural_sky
@@ -117,10 +117,7 @@ def material_preview(material_file, path, res=96, spp=64) -> None:
             "object": {"type": "sphere", "bsdf": {"type": "dsbrdf", "filename": os.path.abspath(material_file)}},
             "light": light})
         tiles.append(np.array(mi.render(scene, spp=spp, seed=0), dtype=np.float32))
-    spheres = np.concatenate(tiles, axis=1)
-    srgb = np.array(mi.Bitmap(np.ascontiguousarray(spheres), mi.Bitmap.PixelFormat.RGB).convert(
-        mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True))
-    brdf_slices(Material.load(material_file), path, srgb)
+    brdf_slices(Material.load(material_file), path, np.array(srgb_bitmap(np.concatenate(tiles, axis=1))))
 
 
 #: the theta_d (degrees) of the BRDF slices in material.png

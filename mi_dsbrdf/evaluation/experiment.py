@@ -61,11 +61,9 @@ every method alike) and scores it:
 * ``baseline``: doing nothing, scored on the same case: the leave-one-out
   model's mean material (psi = 0) in every BRDF and relighting measure, and for
   probes a constant map in ``illumination_error`` on the same seen texels;
-* ``posterior`` (this tool's answers): the material's posterior band
-  (:func:`~mi_dsbrdf.evaluation.metrics.band_scores`: its coverage of the
-  truth and its width, where the image looked and elsewhere) at each of
-  :data:`TEMPERATURES` and the shipped one, with the map's (``map_coverage``,
-  :func:`map_coverage`; probes), and the seconds they took within the recovery's;
+* ``posterior`` (this tool's answers): the posterior band's coverage of the truth and its width,
+  the material's and the map's (:func:`~mi_dsbrdf.evaluation.metrics.posterior_scores`) at each
+  of :data:`TEMPERATURES` and the shipped ones, and the seconds they took within the recovery's;
 * ``terms``: the last logged round's negative log posterior term by term
   (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
@@ -85,26 +83,25 @@ import numpy as np
 from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
-from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, band_scores, bsdf_values, direction_error_deg,
-                                          highlight_ratio, log_error_by_theta_d,
+from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
+                                          log_error_by_theta_d, posterior_scores,
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
                                           scale_invariant_log_error, split_errors)
-from mi_dsbrdf.inference.envmap import MAP_TEMPERATURE, recover_envmap
+from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import read_image
 from mi_dsbrdf.inference.latlong import texel_blocks
 from mi_dsbrdf.inference.light import recover_light
 from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import usable_pixels
-from mi_dsbrdf.inference.reflectance import POSTERIOR_TEMPERATURE, reflectance_starts
+from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
+from mi_dsbrdf.inference.uncertainty import MAP_TEMPERATURE, POSTERIOR_TEMPERATURE
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.build import DEFAULT_K, GMM, build_from_fits, gmm_structure, save_model, stored_fits
 from mi_dsbrdf.model.samples import samples_from_table
 
-#: the posterior band scored (``posterior``), and the temperatures
-#: (:meth:`~mi_dsbrdf.inference.reflectance.Laplace.factor`) it is scored at
-#: beside the shipped one
+#: the posterior band scored (``posterior``) and the temperatures it is scored at beside the shipped ones
 BAND_LEVEL = 0.9
 TEMPERATURES = (30, 100, 300, 1000, 2000, 4000, 10000, 30000)
 #: probes used for relighting (the first two that differ from the case's probe)
@@ -310,7 +307,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
                             if k in ("neg_log_posterior", "likelihood", "curve_penalty", "gmm", "hue", "entropy",
                                      "gradient", "chromaticity", "light_colour")}
             material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
-            laplace, posterior_seconds = result.laplace, result.posterior_seconds
+            laplace, spread, posterior_seconds = result.laplace, result.illumination_spread, result.posterior_seconds
             values = material.eval(samples.theta_h, samples.theta_d)
         else:
             fit = adam_recover(img, keep, res, (H, W), method, model, spp=case.get("spp", 16),
@@ -324,8 +321,6 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         out["illumination_error"] = scale_invariant_log_error(recovered_map, small, seen)
         out["illumination_error_paper"] = scale_invariant_log_error(recovered_map, small, seen, "paper")
         out["seen_fraction"] = float(seen.mean())
-        if method == "dsbrdf":
-            spread = result.illumination_spread
         maps = {"illumination": _normalised_pair(small, recovered_map, seen)}
     for c in CONVENTIONS:
         out["brdf_eq20_" + c], s = log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)
@@ -334,18 +329,12 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             out["brdf_eq20_paper_by_theta_d"] = log_error_by_theta_d(values, samples.values, samples.theta_d, scale)
     out.update(_observed_errors(values, samples, where))
     if laplace is not None:
-        # the posterior band at each temperature, the shipped one among them
-        temperatures = sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE, MAP_TEMPERATURE})
-        bands = {"%g" % t: band_scores(material.with_covariance(laplace.factor(t)), samples, where, scale,
-                                       BAND_LEVEL) for t in temperatures}
+        # the posterior band at each temperature, the shipped ones among them
         out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "map_default": MAP_TEMPERATURE,
-                            "seconds": posterior_seconds, "temperature": bands}
-        if spread is not None:
-            # the map's band: the truth map within the level's normal quantile of the spread
-            # (which scales as the square root of the temperature), after the best log scale
-            for t in temperatures:
-                bands["%g" % t]["map_coverage"] = map_coverage(
-                    recovered_map, small, seen, spread * math.sqrt(t / MAP_TEMPERATURE), BAND_LEVEL)
+                            "seconds": posterior_seconds, "temperature": posterior_scores(
+                                material, laplace, samples, where, scale,
+                                sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE, MAP_TEMPERATURE}), BAND_LEVEL,
+                                None if spread is None else (recovered_map, small, seen, spread, MAP_TEMPERATURE))}
     if getattr(material, "psi", None) is not None:
         out["material"] = {"psi": material.psi.tolist(), "chromaticity": material.chromaticity.tolist()}
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
@@ -359,15 +348,6 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     out["finite"] = _finite(out)
     out["images"] = images
     return out
-
-
-def map_coverage(recovered, truth, seen, spread, level) -> float:
-    """The share of seen texel channels whose truth (H, W, 3) lies within the
-    normal ``level`` band of the recovered map's log, +- z ``spread`` (H, W, 3),
-    after the best log scale (the mean log ratio over the seen texels)."""
-    from scipy.stats import norm
-    r = np.log(np.maximum(truth[seen], 1e-30)) - np.log(np.maximum(recovered[seen], 1e-30))
-    return float(np.mean(np.abs(r - r.mean()) <= norm.ppf(0.5 + level / 2) * spread[seen]))
 
 
 def _observed(view, light, keep, samples) -> np.ndarray:

@@ -17,7 +17,9 @@ use them; they are re-exported here beside the measures of a recovery:
 * :func:`bsdf_values` — any Mitsuba BSDF on the MERL grid, to score baselines
   on the same samples as the DSBRDF;
 * :func:`band_scores` — whether a recovered material's posterior band holds the
-  truth (its coverage) and how wide it is, where the image looked and elsewhere.
+  truth (its coverage) and how wide it is, where the image looked and elsewhere;
+  :func:`map_coverage`, the same for a map's spread; :func:`posterior_scores`, both
+  at several temperatures.
 """
 from __future__ import annotations
 
@@ -138,4 +140,29 @@ def band_scores(material, samples, where, scale, level=0.9, n=128, seed=0) -> di
     for part, cell in (("observed", seen), ("unobserved", ~seen)):
         out["coverage_" + part] = float(inside[cell].mean()) if cell.any() else float("nan")
         out["width_" + part] = float(np.median(width[cell])) if cell.any() else float("nan")
+    return out
+
+
+def map_coverage(recovered, truth, seen, spread, level) -> float:
+    """The share of seen texel channels whose truth (H, W, 3) lies within the
+    normal ``level`` band of the recovered map's log, +- z ``spread`` (H, W, 3),
+    after the best log scale (the mean log ratio over the seen texels)."""
+    from scipy.stats import norm
+    r = np.log(np.maximum(truth[seen], 1e-30)) - np.log(np.maximum(recovered[seen], 1e-30))
+    return float(np.mean(np.abs(r - r.mean()) <= norm.ppf(0.5 + level / 2) * spread[seen]))
+
+
+def posterior_scores(material, laplace, samples, where, scale, temperatures, level, map_spread=None) -> dict:
+    """{"%g" % t: :func:`band_scores` of ``material`` with the covariance
+    ``laplace.factor(t)``} for each temperature t; with ``map_spread`` =
+    (recovered map, truth map, seen texels, spread, the spread's temperature), each
+    also holds ``map_coverage`` (:func:`map_coverage` of the spread scaled to t: a
+    standard deviation grows as the square root of the temperature)."""
+    out = {}
+    for t in temperatures:
+        out["%g" % t] = band_scores(material.with_covariance(laplace.factor(t)), samples, where, scale, level)
+        if map_spread is not None:
+            recovered, truth, seen, spread, t_spread = map_spread
+            out["%g" % t]["map_coverage"] = map_coverage(recovered, truth, seen, spread * math.sqrt(t / t_spread),
+                                                         level)
     return out

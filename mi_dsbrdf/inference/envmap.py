@@ -61,10 +61,11 @@ from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
-from mi_dsbrdf.inference.forward import TexelSum, apply_transport
+from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
-from mi_dsbrdf.inference.reflectance import image_chroma_logits, laplace, reflectance_block, reflectance_starts
+from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
+from mi_dsbrdf.inference.uncertainty import illumination_spread, laplace
 from mi_dsbrdf.model.priors import LOG_CHROMA_BASIS
 
 #: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
@@ -170,37 +171,6 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
                     seen=seen, log=rows, laplace=posterior_of_material, illumination_spread=spread,
                     posterior_seconds=time.perf_counter() - t_posterior)
-
-
-#: the temperature of the map's spread (:func:`illumination_spread`), chosen on
-#: validation for the 90 % band's coverage of the truth map
-MAP_TEMPERATURE = 300.0
-
-
-def illumination_spread(post, log_map, T, seen, temperature=None) -> np.ndarray:
-    """(H, W, 3) the posterior's standard deviation of the log map (natural log
-    units) per texel and channel, from the diagonal of the illumination block's
-    Hessian at the MAP with the material held: the likelihood's expected Hessian
-    (Eq. 19's Laplacian at the residuals' own scale, as the material's
-    :func:`~mi_dsbrdf.inference.reflectance.laplace`) plus the gradient prior's
-    (Eq. 16, its majoriser's diagonal); the entropy prior (Eq. 13-15), not convex,
-    is left out. Tempered: the variance times ``temperature`` (default
-    :data:`MAP_TEMPERATURE`). A diagonal
-    ignores the texels' correlations: it understates the spread where neighbours
-    trade light. Texels no pixel sees are 0 (no estimate, as in the map)."""
-    t = MAP_TEMPERATURE if temperature is None else float(temperature)
-    H, W = seen.shape
-    L = np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3)
-    image = apply_transport(T, L)
-    keep = post.keep
-    mp = np.maximum(image[keep], 0) + post.offset                              # (P, 3)
-    d = np.log(mp) - np.log(np.maximum(post.observed[keep], 0) + post.offset)
-    b_hat = max(float(np.mean(np.abs(d))), post.kink)
-    # d log(pixel) / d log(texel) = T L / pixel, per channel
-    diag = np.stack([((np.asarray(T[c][keep], dtype=np.float64) * L[None, :, c] / mp[:, c:c + 1]) ** 2).sum(axis=0)
-                     for c in range(3)], axis=1).reshape(H, W, 3) * post.weight / (post.scale * b_hat)
-    diag = diag + post.gradient.majoriser_diagonal(log_map)[..., None]
-    return np.where(seen[..., None], np.sqrt(t / np.maximum(diag, 1e-300)), 0.0)
 
 
 def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> tuple:

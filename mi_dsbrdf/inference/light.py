@@ -25,8 +25,9 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior, angles_from_direction, direction_from_angles
-from mi_dsbrdf.inference.reflectance import image_chroma_logits, laplace, reflectance_block, reflectance_starts
+from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
+from mi_dsbrdf.inference.uncertainty import laplace
 
 #: directions of the global search (Fibonacci lattice) and how many of them go on
 SEARCH_DIRECTIONS, SEARCH_KEEP = 64, 6

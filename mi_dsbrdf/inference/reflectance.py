@@ -13,14 +13,11 @@ if the full negative log posterior falls.
 from __future__ import annotations
 
 import dataclasses
-import math
-import time
 
 import numpy as np
 
 from mi_dsbrdf.brdf.chromaticity import chroma_logits, softmax_chroma, softmax_jacobian
-from mi_dsbrdf.brdf.curves import N_CONTROL
-from mi_dsbrdf.brdf.dsbrdf import LOBE_PARAMETERS, passed_through
+from mi_dsbrdf.brdf.dsbrdf import passed_through
 from mi_dsbrdf.lm import Damping, levenberg_marquardt
 
 #: bound of the chromaticity variables (softmax logits): c >= ~e^-6 / 2
@@ -231,96 +228,3 @@ def reflectance_block(post, psi, logits, L, iters, fit_scale=False, direction=No
     p, z, sc, ang = unpack(res.x)
     aim(ang)
     return ReflectanceStep(p, z, L * np.exp(sc), None if ang is None else tuple(ang))
-
-
-@dataclasses.dataclass(frozen=True)
-class Laplace:
-    """The Laplace approximation of the posterior of the material at its MAP,
-    with the light held at its MAP (paper §4's posterior, not in the paper).
-
-    In the variables x = (psi (k,), chromaticity variables (R, 2) if they were
-    fitted): the negative log posterior's Hessian is ``likelihood`` + ``prior``;
-    ``to_parameters`` maps a change of x to the material's parameters
-    theta = (log kappa controls (R, 6), log gamma controls (R, 6), chromaticity
-    variables (R, 2)), flattened in that order (controls a clamp holds do not move).
-
-    Attributes
-    ----------
-    likelihood : (n, n) expected Hessian of Eq. 19 at the MAP: the Laplacian's
-        Fisher information with its scale from the residuals themselves
-    prior : (n, n) Hessian of the reflectance priors (GMM, curve penalty, and
-        the positive part of the hue and chromaticity priors')
-    to_parameters : (LOBE_PARAMETERS R, n)
-    seconds : the time it took
-    alternatives : ((delta (LOBE_PARAMETERS R,), energy), ...): other modes the
-        search found, as their parameters less the MAP's and their negative log
-        posterior above the MAP's (>= 0)
-    """
-    likelihood: np.ndarray
-    prior: np.ndarray
-    to_parameters: np.ndarray
-    seconds: float = 0.0
-    alternatives: tuple = ()
-
-    def factor(self, temperature=None) -> np.ndarray:
-        """(LOBE_PARAMETERS R, n) F with the parameters' covariance F F^T =
-        temperature x A (likelihood + prior)^-1 A^T, A = ``to_parameters``: the
-        posterior tempered, p^(1 / temperature) (default
-        :data:`POSTERIOR_TEMPERATURE`; neighbouring pixels' residuals are not
-        independent, and the priors' weights grow with the pixels), plus one
-        column a mode in ``alternatives`` (F has n + their number columns).
-        Eigenvalues of the Hessian are floored at EIGEN_FLOOR times the largest."""
-        t = POSTERIOR_TEMPERATURE if temperature is None else float(temperature)
-        w, V = np.linalg.eigh(self.likelihood + self.prior)
-        w = np.maximum(w, EIGEN_FLOOR * max(float(w.max()), 1e-300))
-        F = self.to_parameters @ (V * np.sqrt(t / w))
-        if not self.alternatives:
-            return F
-        # other modes: a mixture of the MAP's Gaussian moved to each mode, weighted by the
-        # tempered posterior exp(-energy / t), matched in its second moment about the MAP
-        # (the MAP's covariance plus each offset's outer product times its weight)
-        p = np.array([math.exp(-max(e, 0.0) / t) for _, e in self.alternatives])
-        weights = p / (1.0 + p.sum())
-        return np.concatenate([F] + [np.sqrt(wt) * np.asarray(d, dtype=np.float64)[:, None]
-                                     for wt, (d, _) in zip(weights, self.alternatives)], axis=1)
-
-
-#: the temperature of the material's posterior covariance (:meth:`Laplace.factor`);
-#: chosen on validation for the 90 % band's coverage of the truth
-POSTERIOR_TEMPERATURE = 4000.0
-#: the smallest eigenvalue of the Hessian the covariance keeps, relative to the largest
-EIGEN_FLOOR = 1e-9
-
-
-def laplace(post, psi, logits, L, fit_chroma=True) -> Laplace:
-    """The :class:`Laplace` approximation at the MAP (psi (k,), chromaticity
-    variables (R, 2)) under the light L (T, 3) (the posterior's light direction
-    as set), over the reflectance block's pixels scaled to stand for all usable
-    ones. One Jacobian of the image (the cost of one Levenberg-Marquardt step).
-
-    Eq. 19's residuals d are Laplacian; at scale b (``post.scale``) its expected
-    Hessian is sum_i J_i J_i^T / (b b_hat), b_hat = mean |d| the residuals' own
-    scale (the Laplacian's density at zero is 1 / (2 b_hat))."""
-    t0 = time.perf_counter()
-    k, R = psi.size, logits.shape[0]
-    jac = post.refl.lobes.jacobian(post.material(psi, logits), L)
-    Jd, d = log_residuals(post, np.concatenate(material_columns(post, jac, psi, logits, fit_chroma), axis=0),
-                          jac.image)
-    b_hat = max(float(np.mean(np.abs(d))), post.kink)
-    likelihood = post.refl.weight * (Jd @ Jd.T) / (post.scale * b_hat)
-    prior = sum(h for _, h in prior_derivatives(post, psi, logits, fit_chroma))
-    if fit_chroma:
-        # the hue prior is not convex: its curvature enters where it is positive
-        w, V = np.linalg.eigh(chroma_prior_hessian(post, logits))
-        prior[k:, k:] += (V * np.maximum(w, 0.0)) @ V.T
-    basis = post.model.basis
-    ctrl = basis.control_values(psi)
-    free = np.stack(passed_through(ctrl[:, 0], ctrl[:, 1]), axis=1)             # (R, 2, 6)
-    moves = (basis.bases * free)                                                 # (k, R, 2, 6)
-    to_controls = np.concatenate([moves[:, :, 0].reshape(k, -1), moves[:, :, 1].reshape(k, -1)], axis=1).T
-    n = prior.shape[0]
-    to_parameters = np.zeros((LOBE_PARAMETERS * R, n))
-    to_parameters[:2 * N_CONTROL * R, :k] = to_controls
-    if fit_chroma:
-        to_parameters[2 * N_CONTROL * R:, k:] = np.eye(2 * R)
-    return Laplace(likelihood, prior, to_parameters, time.perf_counter() - t0)

@@ -26,12 +26,12 @@ class Recovery:
     log : one dict per logged round: "pass", "round", "neg_log_posterior",
         the posterior's terms, "seconds"
     illumination_spread : (H, W, 3) the posterior's standard deviation of the
-        log map per texel (:func:`~mi_dsbrdf.inference.envmap.illumination_spread`;
+        log map per texel (:func:`~mi_dsbrdf.inference.uncertainty.illumination_spread`;
         0 where no pixel sees); None for a point or directional light
     posterior_seconds : the time the material's posterior and the map's spread took
         (within the recovery's)
     laplace : the material's posterior at the MAP
-        (:class:`~mi_dsbrdf.inference.reflectance.Laplace`); ``material`` carries
+        (:class:`~mi_dsbrdf.inference.uncertainty.Laplace`); ``material`` carries
         its covariance (``Material.covariance_factor``)
     """
     material: Material
