@@ -14,12 +14,16 @@ by :func:`mi_dsbrdf.recover` on a preset and saved; then the saved
   under which no other figure can be read.
 
 Cases: the natural-light sets' materials x probes (``--set validation`` or
-``report``, ``--limit`` the first N), at ``--res`` pixels; with ``--sharp`` also
+``report``, ``--limit`` the first N), at ``--res`` pixels; with ``--light point``
+or ``directional``, the same materials under ``scenes/sphere_point.xml`` or
+``sphere_directional.xml`` with the light placed at :data:`LIGHT_ANGLES` from the
+camera instead of the probes (a point light at :data:`POINT_DISTANCE`); with ``--sharp`` also
 a 32 px sphere of gold-metallic-paint's DSBRDF with every lobe's gamma at 4700 (a
 lobe about 2.4 degrees wide in reflected direction, narrower than one pixel's
 footprint) under the first probe. Needs ../shared/data.
 
     .venv/bin/python benchmarks/mitsuba_roundtrip.py --set validation --limit 8    # ~10 min
+    .venv/bin/python benchmarks/mitsuba_roundtrip.py --set report --light point --limit 8
 
 With ``--footprint``, no recovery: the forward model
 (:class:`~mi_dsbrdf.inference.forward.TexelSum`, one ray through each pixel's
@@ -64,9 +68,18 @@ def relative_l1(a, b, mask) -> float:
     return float(np.abs(a[mask] - b[mask]).sum() / np.abs(b[mask]).sum())
 
 
-def cases(which, limit):
+#: --light point / directional: the light's placements, in degrees from the camera
+#: (:func:`~mi_dsbrdf.evaluation.experiment.light_at`), one per natural-light probe slot
+LIGHT_ANGLES = {"validation": (20.0, 55.0, 80.0), "report": (10.0, 30.0, 45.0, 60.0, 70.0, 85.0)}
+#: the point light's distance from the sphere's centre (scene units; the sphere's radius is 1)
+POINT_DISTANCE = 4.0
+
+
+def cases(which, limit, light="envmap"):
     materials, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
                          else (REPORT_MATERIALS, REPORT_PROBES))
+    if light != "envmap":
+        probes = LIGHT_ANGLES[which]
     out = [(m, p) for p in probes for m in materials]
     # interleave the probes so that a --limit slice sees every one of them
     out = [c for i in range(len(materials)) for c in out[i::len(materials)]]
@@ -84,7 +97,7 @@ def photograph(folder, material, probe, res, args):
     from mi_dsbrdf.app.io import write_exr
     from mi_dsbrdf.app.scenes import scene_path
     nbrdf = os.path.join(args.data, "merl", "merl_nbrdf_weights.npz")
-    xml = open(scene_path("sphere_envmap")).read()
+    xml = open(scene_path("sphere_" + args.light)).read()
     if material == SHARP:
         from mi_dsbrdf.brdf.dsbrdf import Material
         from mi_dsbrdf.model import model_file
@@ -96,16 +109,23 @@ def photograph(folder, material, probe, res, args):
         bsdf = ('<bsdf type="merl"><string name="nbrdf" value="%s"/><string name="material" value="%s"/></bsdf>'
                 % (nbrdf, material))
     truth = xml.replace('<bsdf type="dsbrdf" id="material"/>', bsdf)
-    scene = mi.load_string(truth, envmap=os.path.join(args.data, "envmaps", probe), res=str(res),
-                           spp=str(args.photo_spp))
+    if args.light == "envmap":
+        light = {"envmap": os.path.join(args.data, "envmaps", probe)}
+    else:
+        from mi_dsbrdf.evaluation.experiment import light_at
+        d = light_at(probe)
+        light = ({"light_position": ", ".join("%r" % float(v) for v in POINT_DISTANCE * d)} if args.light == "point"
+                 else {"light_direction": ", ".join("%r" % float(v) for v in -d)})
+    scene = mi.load_string(truth, res=str(res), spp=str(args.photo_spp), **light)
     image = os.path.join(folder, "photo.exr")
     write_exr(image, np.array(mi.render(scene, seed=1), dtype=np.float32))
     # the scene as a user gives it: the film at the photograph's size (the light's
-    # values are not used, but its file must load)
+    # values are not used, but its file must load; a point light's distance is kept)
     scene_file = os.path.join(folder, "scene.xml")
     with open(scene_file, "w") as f:
         f.write(xml.replace('name="res" value="128"', 'name="res" value="%d"' % res).replace(
-            'value="textures/sky.exr"', 'value="%s"' % os.path.join(args.data, "envmaps", probe)))
+            'value="textures/sky.exr"', 'value="%s"' % os.path.join(args.data, "envmaps", probe)).replace(
+            'name="light_position" value="2.5, 2.0, 3.0"', 'name="light_position" value="0, 0, %r"' % POINT_DISTANCE))
     return scene_file, image
 
 
@@ -116,8 +136,10 @@ def case(material, probe, res, args) -> dict:
 
     import mi_dsbrdf
     from mi_dsbrdf.config import preset
-    name = "%s-%s" % (material, os.path.splitext(os.path.basename(probe))[0])
-    folder = os.path.join(OUT, "mitsuba_roundtrip", args.set, args.setting_name, name)
+    name = "%s-%s" % (material, os.path.splitext(os.path.basename(probe))[0] if args.light == "envmap"
+                      else "%s%g" % (args.light, probe))
+    folder = os.path.join(OUT, "mitsuba_roundtrip", args.set + ("" if args.light == "envmap" else "-" + args.light),
+                          args.setting_name, name)
     shutil.rmtree(folder, ignore_errors=True)
     os.makedirs(folder)
     scene_file, image = photograph(folder, material, probe, res, args)
@@ -213,6 +235,8 @@ def main(argv=None):
     ap.add_argument("--limit", type=int, default=0, help="the first N cases (0: all)")
     ap.add_argument("--res", type=int, default=64)
     ap.add_argument("--sharp", action="store_true", help="add the sharp case (module doc)")
+    ap.add_argument("--light", choices=("envmap", "point", "directional"), default="envmap",
+                    help="the light of the photographs (module doc)")
     ap.add_argument("--preset", default="default")
     ap.add_argument("--photo-spp", type=int, default=1024)
     ap.add_argument("--spp", type=int, default=2048, help="samples per pixel of each of the two Mitsuba renders")
@@ -229,8 +253,8 @@ def main(argv=None):
     if not have_data(args.data):
         sys.exit("mitsuba_roundtrip: needs the shared data (%s)" % args.data)
     rows = []
-    todo = [(m, p, args.res) for m, p in cases(args.set, args.limit)]
-    if args.sharp:
+    todo = [(m, p, args.res) for m, p in cases(args.set, args.limit, args.light)]
+    if args.sharp and args.light == "envmap":
         todo.append((SHARP, cases(args.set, 1)[0][1], SHARP_RES))
     for material, probe, res in todo:
         r = case(material, probe, res, args)
@@ -246,14 +270,17 @@ def main(argv=None):
     print("Mitsuba vs photo minus re-render vs photo: median %+.1f %%, worst %+.1f %% (target <= +1 %%)"
           % (100 * np.median(excess), 100 * max(excess)))
     out = args.out or (os.path.join(OUT, "mitsuba_roundtrip", args.set, args.setting_name, "summary.json")
-                       if args.config else os.path.join(RESULTS, "mitsuba_roundtrip_%s.json" % args.set))
+                       if args.config else os.path.join(RESULTS, "mitsuba_roundtrip_%s%s.json" % (
+                           args.set, "" if args.light == "envmap" else "_" + args.light)))
     os.makedirs(os.path.dirname(out), exist_ok=True)
-    command = "python benchmarks/mitsuba_roundtrip.py --set %s%s%s%s%s" % (
-        args.set, " --limit %d" % args.limit if args.limit else "", " --sharp" if args.sharp else "",
+    command = "python benchmarks/mitsuba_roundtrip.py --set %s%s%s%s%s%s" % (
+        args.set, "" if args.light == "envmap" else " --light " + args.light,
+        " --limit %d" % args.limit if args.limit else "", " --sharp" if args.sharp else "",
         "" if args.preset == "default" else " --preset " + args.preset,
         " --config " + " ".join("%s=%s" % kv for kv in args.config.items()) if args.config else "")
     with open(out, "w") as f:
-        json.dump({"summary": summary, "cases": rows, "res": args.res, "spp": args.spp, "photo_spp": args.photo_spp,
+        json.dump({"summary": summary, "cases": rows, "light": args.light, "res": args.res, "spp": args.spp,
+                   "photo_spp": args.photo_spp,
                    "preset": args.preset, "config": args.config, "command": command}, f, indent=1, sort_keys=True)
 
 

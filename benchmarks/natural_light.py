@@ -52,7 +52,10 @@ The summary also scores this tool's posterior band (``posterior`` of
 the ones whose median coverage (the material's on observed cells, the map's on
 seen texels) lies nearest the middle of :data:`COVERAGE_TARGET` (on validation:
 the choice of ``mi_dsbrdf.inference.uncertainty.POSTERIOR_TEMPERATURE`` and
-``MAP_TEMPERATURE``).
+``MAP_TEMPERATURE``). It counts whom the highlight flag fires on (``flags``):
+near-Lambertian materials recovered glossy, and the rest, against
+:data:`FLAG_TARGETS`, and names the doubt thresholds that would meet both (on
+validation: the choice of ``HIGHLIGHT_DOUBT``, their middle).
 """
 from __future__ import annotations
 
@@ -205,6 +208,8 @@ def summary(folder) -> str:
         md += ["", "The material's posterior: its 90 % band against the truth (after Eq. 20's best scale) on the "
                "MERL (θh, θd) cells, observed and elsewhere, at each temperature of the Laplace approximation:",
                "", posterior_table(rows)]
+    if flag_rows(rows):
+        md += ["", flag_text(rows)]
     md += ["", "| case | seconds | " + " | ".join("%s (nothing)" % label for _, label, _ in MEASURES) + " |",
            "|---|---|" + "---|" * len(MEASURES)]
     for r in sorted(rows, key=lambda r: r["case"]["id"]):
@@ -264,6 +269,59 @@ def choose_temperature(rows, measure="coverage_observed") -> str:
     middle = np.mean(COVERAGE_TARGET)
     return min(rows[0]["posterior"]["temperature"], key=lambda t: abs(float(np.nanmedian(
         [r["posterior"]["temperature"][t][measure] for r in rows])) - middle))
+
+
+#: the highlight flag's targets: the share of near-Lambertian materials recovered
+#: glossy it fires on (at least), and of the other cases (at most)
+FLAG_TARGETS = (0.8, 0.1)
+
+
+def flag_rows(rows) -> list:
+    """This tool's results that carry ``highlight_doubt`` (None: no highlight to doubt)."""
+    return [r for r in own_rows(rows) if "highlight_doubt" in r]
+
+
+def recovered_glossy(r) -> bool:
+    """A near-Lambertian material (measured peak / off-peak below NEAR_LAMBERTIAN)
+    recovered with a highlight (at least HIGHLIGHT_LIMIT times the measured ratio)."""
+    return r["truth_highlight_ratio"] < NEAR_LAMBERTIAN and r["highlight_ratio"] >= HIGHLIGHT_LIMIT * r[
+        "truth_highlight_ratio"]
+
+
+def flag_counts(rows, doubt=None) -> tuple:
+    """(flagged, of) among the near-Lambertian cases recovered glossy and among the
+    rest: the shipped ``flags``, or with ``doubt`` the flag at that threshold."""
+    def fired(r):
+        return bool(r["flags"]) if doubt is None else r["highlight_doubt"] is not None and \
+            r["highlight_doubt"] >= doubt
+    glossy = [r for r in flag_rows(rows) if recovered_glossy(r)]
+    rest = [r for r in flag_rows(rows) if not recovered_glossy(r)]
+    return sum(map(fired, glossy)), len(glossy), sum(map(fired, rest)), len(rest)
+
+
+def choose_doubt(rows) -> tuple | None:
+    """(lowest, highest, middle) of the doubt thresholds (steps of 0.01) whose flag
+    meets both FLAG_TARGETS on ``rows``; None if none does. The middle, on
+    validation, is ``mi_dsbrdf.inference.uncertainty.HIGHLIGHT_DOUBT``."""
+    ok = []
+    for d in np.round(np.arange(0.01, 1.0, 0.01), 2):
+        g, ng, o, no = flag_counts(rows, d)
+        if ng and g >= FLAG_TARGETS[0] * ng and o <= FLAG_TARGETS[1] * no:
+            ok.append(float(d))
+    return (ok[0], ok[-1], round((ok[0] + ok[-1]) / 2, 2)) if ok else None
+
+
+def flag_text(rows) -> str:
+    """One paragraph: whom the shipped highlight flag fires on, against FLAG_TARGETS,
+    and the thresholds that would meet them on these cases."""
+    g, ng, o, no = flag_counts(rows)
+    chosen = choose_doubt(rows)
+    return ("The highlight flag (``Recovery.flags``: the posterior's probability of no highlight at least "
+            "``HIGHLIGHT_DOUBT``) fires on %d of %d near-Lambertian materials recovered glossy (target at least "
+            "%.0f %%) and on %d of %d other cases (%.0f %%; target at most %.0f %%). %s" % (
+                g, ng, 100 * FLAG_TARGETS[0], o, no, 100 * o / max(no, 1), 100 * FLAG_TARGETS[1],
+                "No threshold meets both targets on these cases." if chosen is None else
+                "Thresholds meeting both here: %.2f to %.2f (middle %.2f)." % chosen))
 
 
 # --- the light-colour prior's spreads (--light-colours) ---------------------------------------

@@ -65,6 +65,7 @@ def test_batch_runs_the_good_rows_reports_the_bad_and_resumes(folder, tmp_path, 
     assert float(table["gold"]["seconds"]) > 0 and table["gold"]["light"].startswith("directional")
     assert 0 < float(table["gold"]["residual"]) < 0.5 and table["lost"]["residual"] == ""
     assert "log_kappa_0_0" in table["gold"] and "chromaticity_0_0" in table["gold"]
+    assert table["gold"]["flags"] == ""           # log.json's flags: gold's highlight is not in doubt
     page = (out / "summary.html").read_text()
     for t in ("input.png", "rerender.png", "material.png"):
         assert 'src="gold/%s"' % t in page and (out / "gold" / t).is_file()

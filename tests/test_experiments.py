@@ -660,3 +660,25 @@ def test_leave_one_out_models_from_another_build_s_fits(tmp_path):
     assert "chrome" not in list(other_model.arrays["library_names"])
     gap = np.abs(other_model.arrays["mean"] - shipped.arrays["mean"]).max()
     np.testing.assert_allclose(gap, 3.0 / 99, rtol=1e-6)      # one of 99 fits moved by 3
+
+
+def test_natural_light_counts_whom_the_highlight_flag_fires_on_and_the_thresholds_meeting_its_targets():
+    """flag_counts splits the near-Lambertian cases recovered glossy from the rest;
+    choose_doubt gives the range of thresholds flagging >= 80 % of the first and
+    <= 10 % of the rest, and its middle."""
+    natural_light = benchmark("natural_light")
+
+    def row(truth, found, doubt, flagged):
+        return {"case": {"method": "dsbrdf"}, "truth_highlight_ratio": truth, "highlight_ratio": found,
+                "highlight_doubt": doubt, "flags": ["x"] * flagged}
+    glossy = [row(1.1, 3.0, d, d >= 0.3) for d in (0.25, 0.35, 0.4, 0.5, 0.6)]
+    rest = [row(1.1, 1.2, None, False)] * 5 + [row(40.0, 50.0, d, d >= 0.3) for d in [0.0] * 13 + [0.2, 0.45]]
+    rows = glossy + rest
+    assert natural_light.flag_counts(rows) == (4, 5, 1, 20)
+    assert natural_light.flag_counts(rows, 0.2) == (5, 5, 2, 20)
+    # 4 of 5 glossy from 0.26 to 0.35, at most 2 of 20 others from 0.01: 0.01 .. 0.35
+    assert natural_light.choose_doubt(rows) == (0.01, 0.35, 0.18)
+    # a glossy case doubted less than three of twenty others: no threshold meets both
+    assert natural_light.choose_doubt([row(1.1, 3.0, 0.1, False)] + rest[:17] + [row(40.0, 50.0, 0.5, True)] * 3) \
+        is None
+    assert "fires on 4 of 5" in natural_light.flag_text(rows) and "1 of 20" in natural_light.flag_text(rows)

@@ -66,6 +66,9 @@ def test_recover_writes_the_result_directory(case, tmp_path, capsys):
     assert log["image_size"] == log["working_grid"]["image"]                    # [H, W] both
     assert list(log["stages"]) == ["checks", "inference", "re-render", "observed directions", "save"]
     assert 0 < log["residual"] < 0.3              # relative L1, led by the highlight
+    # gold's highlight is the photograph's: the posterior does not doubt it, nothing is flagged
+    from mi_dsbrdf.inference.uncertainty import HIGHLIGHT_DOUBT
+    assert 0 <= log["highlight_doubt"] < HIGHLIGHT_DOUBT and log["flags"] == []
     for stage in log["stages"].values():
         assert stage["seconds"] >= 0 and 50 < stage["peak_memory_mb"] < 1e5
     # scene.xml re-renders the input with the recovered material and light, from any working directory

@@ -161,3 +161,33 @@ def test_other_modes_widen_the_covariance_by_their_tempered_weight(recovered):
     for energy, weight in ((0.0, 0.5), (10.0, np.exp(-1) / (1 + np.exp(-1))), (1e4, 0.0)):
         F = dataclasses.replace(lp, alternatives=((delta, energy),)).factor(10.0)
         assert np.allclose(F @ F.T, base + weight * np.outer(delta, delta))
+
+
+def test_a_highlight_the_posterior_doubts_is_flagged_and_a_sure_one_is_not():
+    """highlight_doubt is the share of posterior samples without a highlight, for a
+    MAP with one; Recovery.flags names it in one line from HIGHLIGHT_DOUBT on."""
+    from mi_dsbrdf.brdf.dsbrdf import NO_HIGHLIGHT
+    from mi_dsbrdf.inference.result import Recovery
+    from mi_dsbrdf.inference.uncertainty import HIGHLIGHT_DOUBT, highlight_doubt
+    model = model_data.shipped_model()
+    gold = model.library_material(TRUTH)
+    n = LOBE_PARAMETERS * gold.n_lobes
+
+    def recovery(material):
+        return Recovery(material=material, psi=np.zeros(1), chromaticity=material.chromaticity,
+                        highlight_doubt=highlight_doubt(material))
+
+    sure = recovery(gold.with_covariance(np.sqrt(1e-3) * np.eye(n)))
+    assert sure.highlight_doubt == 0.0 and sure.flags == []
+    # lobes of gamma 1: a highlight just above NO_HIGHLIGHT, which a wide posterior doubts
+    weak = Material(gold.log_kappa, np.zeros_like(gold.log_gamma), gold.chromaticity)
+    assert NO_HIGHLIGHT <= weak.highlight_ratio() < 2 * NO_HIGHLIGHT
+    doubted = recovery(weak.with_covariance(np.sqrt(0.3) * np.eye(n)))
+    assert HIGHLIGHT_DOUBT <= doubted.highlight_doubt < 1.0
+    assert len(doubted.flags) == 1 and "highlight" in doubted.flags[0] and "\n" not in doubted.flags[0]
+    assert recovery(weak.with_covariance(np.sqrt(1e-4) * np.eye(n))).flags == []
+    # a MAP without a highlight has nothing to doubt
+    fabric = model.library_material("white-fabric")
+    assert recovery(fabric.with_covariance(np.sqrt(0.3) * np.eye(n))).highlight_doubt is None
+    with pytest.raises(MaterialError):
+        weak.no_highlight_probability()

@@ -59,7 +59,8 @@ def summary_rows(out, names, failures=None, seconds=None) -> list:
     """One dict per row of the summary: name, status, reason, seconds (the
     recovery's wall time: its stages, or as measured for a failure), the
     re-render's relative L1 residual over the used pixels, peak memory,
-    the final negative log posterior, the light's summary, and the material's
+    the final negative log posterior, the light's summary, the result's flags
+    (log.json's, joined by "; "), and the material's
     parameters flattened (``log_kappa_0_1``, ...), from each result folder."""
     failures, seconds = failures or {}, seconds or {}
     table = []
@@ -83,7 +84,7 @@ def summary_rows(out, names, failures=None, seconds=None) -> list:
                            peak_memory_mb="%.0f" % max([s.get("peak_memory_mb", 0) for s in stages] or [0]),
                            neg_log_posterior="%.6g" % rounds[-1]["neg_log_posterior"]
                            if "neg_log_posterior" in rounds[-1] else "",
-                           light=_light_text(folder, log))
+                           light=_light_text(folder, log), flags="; ".join(log.get("flags") or []))
                 for key in ("log_kappa", "log_gamma", "chromaticity", "psi"):
                     if key in material:
                         row.update(_flat(key, material[key]))
@@ -118,7 +119,7 @@ def _html(out, table) -> str:
     e = html.escape
     done = sum(r["status"] == DONE for r in table)
     head = ["name", "status"] + [t[:-4] for t in THUMBNAILS] + ["light", "residual", "seconds", "peak MB",
-                                                                 "-log posterior", "reason"]
+                                                                 "-log posterior", "flags", "reason"]
     lines = ["<!DOCTYPE html>", "<html><head><meta charset=\"utf-8\"><title>mi-dsbrdf batch</title>",
              "<style>body{font-family:sans-serif}table{border-collapse:collapse}td,th{border:1px solid #ccc;"
              "padding:4px;vertical-align:middle}img{width:96px;image-rendering:pixelated}"
@@ -135,7 +136,7 @@ def _html(out, table) -> str:
             else:
                 cells.append("")
         cells += [e(str(r.get(k, ""))) for k in ("light", "residual", "seconds", "peak_memory_mb",
-                                                 "neg_log_posterior", "reason")]
+                                                 "neg_log_posterior", "flags", "reason")]
         lines.append("<tr class=\"%s\">%s</tr>" % (e(r["status"]), "".join("<td>%s</td>" % c for c in cells)))
     lines += ["</table></body></html>", ""]
     return "\n".join(lines)

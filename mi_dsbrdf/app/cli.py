@@ -154,6 +154,8 @@ def cmd_recover(args):
     if result.log.get("unseen_texels"):
         print("  %d illumination texels are seen by no pixel: left black (see illumination.png)"
               % result.log["unseen_texels"])
+    for flag in result.log.get("flags", []):
+        print("  warning: " + flag)
     print("recovered in %.1f s -> %s" % (result.seconds, args.out))
 
 

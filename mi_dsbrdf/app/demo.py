@@ -177,6 +177,7 @@ def _run(out, material, res, config, spp) -> dict:
                   found, samples, found.observed(samples.theta_h, samples.theta_d) > 0,
                   log_rmse_scale_invariant(found.eval(samples.theta_h, samples.theta_d), samples.values,
                                            samples.cos_i)[1]).items()},
+              "flags": log.get("flags") or [],
               "unseen_texels": log.get("unseen_texels"), "rounds": len(log["rounds"]),
               "final_neg_log_posterior": log["rounds"][-1]["neg_log_posterior"]}
     with open(os.path.join(out, "report.json"), "w") as f:
@@ -219,9 +220,10 @@ matched: one image cannot fix it).*
 {band_coverage_observed:.0%} / {band_coverage_unobserved:.0%} |
 | the band's median width in log(f + 1e-6): where the image looked / elsewhere | \
 {band_width_observed:.2f} / {band_width_unobserved:.2f} |
+| what the photograph may not support (log.json's flags) | {flag_text} |
 | illumination texels no pixel sees (left black) | {unseen_texels} |
 | rounds / final negative log posterior | {rounds} / {final_neg_log_posterior:.4g} |
 
 Files: `observed.exr`, `recovered/` (the `mi-dsbrdf recover` result directory),
 `comparison.png`, `report.json`.
-""".format(**r)
+""".format(flag_text="; ".join(r["flags"]) or "none", **r)

@@ -153,7 +153,8 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
            "stages": stages, "needs": list(needs.reasons), "rounds": rows, "used_pixels": int(keep.sum()),
            "working_grid": grid.log(),
            "seconds": rec.seconds,
-           "unseen_texels": rows[-1].get("unseen_texels") if rows else None}
+           "unseen_texels": rows[-1].get("unseen_texels") if rows else None,
+           "highlight_doubt": rec.highlight_doubt, "flags": rec.flags}
     used = grid.repeat(keep)
     log["residual"] = relative_residual(obs, rerender, used)
     return Result(material=material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,

@@ -14,9 +14,10 @@ and ``mi-dsbrdf recover``):
     scene.xml           the input scene with the recovered material and light (when the
                         scene came from a file or a dict, not an ``mi.Scene``)
     log.json            the package version, the Config, the image and map sizes, what the scene
-                        needed and why, every round's posterior terms and time, and each stage's
+                        needed and why, every round's posterior terms and time, each stage's
                         (checks, inference, re-render, observed directions, save) time and
-                        peak memory
+                        peak memory, and "flags": one line for each part of the answer the
+                        photograph may not support (``Recovery.flags``)
     input.png, rerender.png, residual.png, material.png (spheres), illumination.png    previews
 
 The folder is written whole or not at all (:func:`~mi_dsbrdf.app.io.staged_output`).
@@ -71,7 +72,8 @@ class Result:
         "re-render", "observed directions": {"seconds", "peak_memory_mb"}} ("save" is added in log.json),
         "needs": one line per decision about the scene, "rounds": one dict per
         logged round (posterior terms, seconds), "seconds", "residual" (the
-        re-render's relative L1 from the image over the used pixels), ...}
+        re-render's relative L1 from the image over the used pixels),
+        "highlight_doubt", "flags" (``Recovery``'s), ...}
     image : (H, W, 3) float64 observed image (linear); used : (H, W) bool, the
         pixels inference used (an image larger than ``Config.working_pixels``: the
         pixels of the used blocks, :mod:`~mi_dsbrdf.app.working_grid`); rerender :

@@ -117,6 +117,10 @@ def lobe_rgb(log_cos_h, theta_d, log_kappa, log_gamma, chromaticity, knots=DEFAU
     return rgb
 
 
+#: a peak / off-peak ratio (:func:`highlight_ratio`) below this is no highlight
+NO_HIGHLIGHT = 1.5
+
+
 def highlight_ratio(values, theta_h, theta_d) -> float:
     """How much of a highlight a BRDF has: the median over samples near the
     half-vector peak (theta_h < 5 deg) over the median at theta_h 40-50 deg,
@@ -267,6 +271,12 @@ class Material:
             raise ValueError("level must lie in (0, 1), got %r" % (level,))
         values = np.stack([m.eval(theta_h, theta_d) for m in self.sample(n, seed)])
         return tuple(np.quantile(values, [(1 - level) / 2, (1 + level) / 2], axis=0))
+
+    def no_highlight_probability(self, below=NO_HIGHLIGHT, n=128, seed=1) -> float:
+        """The posterior's probability that the material has no highlight: the share
+        of ``n`` posterior samples (:meth:`sample`) whose :meth:`highlight_ratio` is
+        below ``below``. MaterialError for a material without a covariance."""
+        return float(np.mean([m.highlight_ratio() < below for m in self.sample(n, seed)]))
 
     def observed(self, theta_h, theta_d):
         """How much of the image's light-weighted pixel x light pairs saw each

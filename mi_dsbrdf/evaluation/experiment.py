@@ -64,6 +64,9 @@ every method alike) and scores it:
 * ``posterior`` (this tool's answers): the posterior band's coverage of the truth and its width,
   the material's and the map's (:func:`~mi_dsbrdf.evaluation.metrics.posterior_scores`) at each
   of :data:`TEMPERATURES` and the shipped ones, and the seconds they took within the recovery's;
+* ``other_mode`` (probes with this tool, where the second route ran): the posterior's other mode
+  against the answer and the truth (:func:`~mi_dsbrdf.evaluation.metrics.mode_scores`);
+* ``highlight_doubt`` and ``flags`` (this tool's answers): what ``Recovery`` says of them;
 * ``terms``: the last logged round's negative log posterior term by term
   (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
@@ -84,7 +87,7 @@ from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
 from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
-                                          log_error_by_theta_d, posterior_scores,
+                                          log_error_by_theta_d, mode_scores, posterior_scores,
                                           log_rmse, log_rmse_scale_invariant, relight_psnr,
                                           scale_invariant_log_error, split_errors)
 from mi_dsbrdf.inference.envmap import recover_envmap
@@ -309,6 +312,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             material, rows, seen, recovered_map = result.material, result.log, result.seen, result.illumination
             laplace, spread, posterior_seconds = result.laplace, result.illumination_spread, result.posterior_seconds
             values = material.eval(samples.theta_h, samples.theta_d)
+            if result.other_mode is not None:
+                out["other_mode"] = mode_scores(result.other_mode, result.other_mode_gap, values, samples)
         else:
             fit = adam_recover(img, keep, res, (H, W), method, model, spp=case.get("spp", 16),
                                iters=case.get("iters", 100), shape=shape, seed=0)
@@ -329,6 +334,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             out["brdf_eq20_paper_by_theta_d"] = log_error_by_theta_d(values, samples.values, samples.theta_d, scale)
     out.update(_observed_errors(values, samples, where))
     if laplace is not None:
+        out["highlight_doubt"], out["flags"] = result.highlight_doubt, result.flags
         # the posterior band at each temperature, the shipped ones among them
         out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "map_default": MAP_TEMPERATURE,
                             "seconds": posterior_seconds, "temperature": posterior_scores(

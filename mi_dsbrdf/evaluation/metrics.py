@@ -19,7 +19,7 @@ use them; they are re-exported here beside the measures of a recovery:
 * :func:`band_scores` — whether a recovered material's posterior band holds the
   truth (its coverage) and how wide it is, where the image looked and elsewhere;
   :func:`map_coverage`, the same for a map's spread; :func:`posterior_scores`, both
-  at several temperatures.
+  at several temperatures; :func:`mode_scores`, the posterior's other mode.
 """
 from __future__ import annotations
 
@@ -154,15 +154,33 @@ def map_coverage(recovered, truth, seen, spread, level) -> float:
 
 def posterior_scores(material, laplace, samples, where, scale, temperatures, level, map_spread=None) -> dict:
     """{"%g" % t: :func:`band_scores` of ``material`` with the covariance
-    ``laplace.factor(t)``} for each temperature t; with ``map_spread`` =
+    ``laplace.factor(t)``, and its ``no_highlight`` probability
+    (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.no_highlight_probability`)} for each
+    temperature t; with ``map_spread`` =
     (recovered map, truth map, seen texels, spread, the spread's temperature), each
     also holds ``map_coverage`` (:func:`map_coverage` of the spread scaled to t: a
     standard deviation grows as the square root of the temperature)."""
     out = {}
     for t in temperatures:
-        out["%g" % t] = band_scores(material.with_covariance(laplace.factor(t)), samples, where, scale, level)
+        tempered = material.with_covariance(laplace.factor(t))
+        out["%g" % t] = band_scores(tempered, samples, where, scale, level)
+        out["%g" % t]["no_highlight"] = tempered.no_highlight_probability()
         if map_spread is not None:
             recovered, truth, seen, spread, t_spread = map_spread
             out["%g" % t]["map_coverage"] = map_coverage(recovered, truth, seen, spread * math.sqrt(t / t_spread),
                                                          level)
+    return out
+
+
+def mode_scores(other, gap, values, samples) -> dict:
+    """How the posterior's other mode (``other``, a Material with negative log
+    posterior ``gap`` above the answer's) differs from the answer (its BRDF
+    ``values`` (N, 3) at ``samples``) and how it scores against the truth:
+    {"gap", "highlight_ratio", "distance_<c>": Eq. 20 between the two materials,
+    "brdf_eq20_<c>": Eq. 20 of the other mode against the truth}, c each convention."""
+    ov = other.eval(samples.theta_h, samples.theta_d)
+    out = {"gap": float(gap), "highlight_ratio": highlight_ratio(ov, samples.theta_h, samples.theta_d)}
+    for c in CONVENTIONS:
+        out["distance_" + c] = log_rmse_scale_invariant(ov, values, samples.cos_i, c)[0]
+        out["brdf_eq20_" + c] = log_rmse_scale_invariant(ov, samples.values, samples.cos_i, c)[0]
     return out

@@ -65,7 +65,7 @@ from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
-from mi_dsbrdf.inference.uncertainty import illumination_spread, laplace
+from mi_dsbrdf.inference.uncertainty import highlight_doubt, illumination_spread, laplace
 from mi_dsbrdf.model.priors import LOG_CHROMA_BASIS
 
 #: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
@@ -161,16 +161,20 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     posterior_of_material = laplace(last, psi, logits, np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3),
                                     fit_chroma=colour)
     material = Material.from_basis(model.basis, psi, chroma, name="recovered")
+    other_material = gap = None
     if loser is not None:
         # the other route's answer: a second mode of the same posterior
-        other_material = Material.from_basis(model.basis, loser[0], softmax_chroma(loser[1]))
+        other_material = Material.from_basis(model.basis, loser[0], softmax_chroma(loser[1]), name="other mode")
+        gap = float(loser[4] - end[4])
         posterior_of_material = dataclasses.replace(posterior_of_material, alternatives=(
-            (other_material.parameters() - material.parameters(), float(loser[4] - end[4])),))
+            (other_material.parameters() - material.parameters(), gap),))
     spread = illumination_spread(last, log_map, last.transport(psi, logits), seen)
-    return Recovery(material=material.with_covariance(posterior_of_material.factor()), psi=psi,
+    material = material.with_covariance(posterior_of_material.factor())
+    return Recovery(material=material, psi=psi, highlight_doubt=highlight_doubt(material),
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
                     seen=seen, log=rows, laplace=posterior_of_material, illumination_spread=spread,
-                    posterior_seconds=time.perf_counter() - t_posterior)
+                    posterior_seconds=time.perf_counter() - t_posterior, other_mode=other_material,
+                    other_mode_gap=gap)
 
 
 def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> tuple:

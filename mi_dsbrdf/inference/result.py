@@ -5,7 +5,7 @@ import dataclasses
 
 import numpy as np
 
-from mi_dsbrdf.brdf.dsbrdf import Material
+from mi_dsbrdf.brdf.dsbrdf import NO_HIGHLIGHT, Material
 
 
 @dataclasses.dataclass(frozen=True)
@@ -30,6 +30,13 @@ class Recovery:
         0 where no pixel sees); None for a point or directional light
     posterior_seconds : the time the material's posterior and the map's spread took
         (within the recovery's)
+    highlight_doubt : for a material recovered with a highlight, the posterior's
+        probability that it has none
+        (:func:`~mi_dsbrdf.inference.uncertainty.highlight_doubt`); None otherwise
+    other_mode : the other route's answer where the second route ran
+        (``Config.second_route_highlight``): a second mode of the same posterior,
+        as a :class:`~mi_dsbrdf.brdf.dsbrdf.Material`; None otherwise
+    other_mode_gap : its negative log posterior above the answer's (>= 0)
     laplace : the material's posterior at the MAP
         (:class:`~mi_dsbrdf.inference.uncertainty.Laplace`); ``material`` carries
         its covariance (``Material.covariance_factor``)
@@ -44,11 +51,28 @@ class Recovery:
     laplace: object = None
     illumination_spread: np.ndarray = None
     posterior_seconds: float = 0.0
+    other_mode: Material = None
+    other_mode_gap: float = None
+    highlight_doubt: float = None
 
     @property
     def neg_log_posterior(self) -> float:
         """The last logged negative log posterior."""
         return float(self.log[-1]["neg_log_posterior"])
+
+    @property
+    def flags(self) -> list:
+        """One line for each part of the answer the photograph may not support: a
+        highlight whose :attr:`highlight_doubt` is at least
+        :data:`~mi_dsbrdf.inference.uncertainty.HIGHLIGHT_DOUBT` (near-Lambertian
+        materials, under a sun above all, can come back glossy)."""
+        from mi_dsbrdf.inference.uncertainty import HIGHLIGHT_DOUBT
+        if self.highlight_doubt is None or self.highlight_doubt < HIGHLIGHT_DOUBT:
+            return []
+        return ["the highlight may be the prior's, not the photograph's: the posterior gives %.0f %% to a material "
+                "with none (peak / off-peak at the mirror direction below %.1f; the answer's is %.1f); "
+                "material.png shows the band" % (100 * self.highlight_doubt, NO_HIGHLIGHT,
+                                                 self.material.highlight_ratio())]
 
     @property
     def seconds(self) -> float:

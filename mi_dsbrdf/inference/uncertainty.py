@@ -1,9 +1,10 @@
 """The posterior's uncertainty at the MAP (not in the paper): the material's
-Laplace approximation (:func:`laplace`, :class:`Laplace`) and the illumination
+Laplace approximation (:func:`laplace`, :class:`Laplace`), the illumination
 map's per-texel spread (:func:`illumination_spread`), each tempered by a
-temperature chosen on validation.
+temperature chosen on validation, and the doubt on a recovered highlight
+(:func:`highlight_doubt`).
 
-Both take the likelihood's curvature from Eq. 19's expected Hessian at the
+The first two take the likelihood's curvature from Eq. 19's expected Hessian at the
 residuals' own scale (:func:`fisher_scale`) and the priors' curvature from the
 blocks that minimise them (:mod:`~mi_dsbrdf.inference.reflectance`,
 :class:`~mi_dsbrdf.inference.illumination_priors.GradientPrior`).
@@ -17,7 +18,7 @@ import time
 import numpy as np
 
 from mi_dsbrdf.brdf.curves import N_CONTROL
-from mi_dsbrdf.brdf.dsbrdf import LOBE_PARAMETERS, passed_through
+from mi_dsbrdf.brdf.dsbrdf import LOBE_PARAMETERS, NO_HIGHLIGHT, passed_through
 from mi_dsbrdf.inference.forward import apply_transport
 from mi_dsbrdf.inference.reflectance import (chroma_prior_hessian, log_residuals, material_columns,
                                              prior_derivatives)
@@ -76,10 +77,19 @@ class Laplace:
         # other modes: a mixture of the MAP's Gaussian moved to each mode, weighted by the
         # tempered posterior exp(-energy / t), matched in its second moment about the MAP
         # (the MAP's covariance plus each offset's outer product times its weight)
-        p = np.array([math.exp(-max(e, 0.0) / t) for _, e in self.alternatives])
-        weights = p / (1.0 + p.sum())
+        weights = mode_weights([e for _, e in self.alternatives], t)
         return np.concatenate([F] + [np.sqrt(wt) * np.asarray(d, dtype=np.float64)[:, None]
                                      for wt, (d, _) in zip(weights, self.alternatives)], axis=1)
+
+
+def mode_weights(gaps, temperature=None) -> np.ndarray:
+    """The tempered posterior's weight of each other mode, exp(-gap / t) /
+    (1 + sum exp(-gap / t)), ``gaps`` their negative log posterior above the MAP's
+    (>= 0; t default :data:`POSTERIOR_TEMPERATURE`). The MAP's own weight is 1
+    less their sum."""
+    t = POSTERIOR_TEMPERATURE if temperature is None else float(temperature)
+    p = np.array([math.exp(-max(float(g), 0.0) / t) for g in gaps])
+    return p / (1.0 + p.sum())
 
 
 #: the temperature of the material's posterior covariance (:meth:`Laplace.factor`);
@@ -119,6 +129,24 @@ def laplace(post, psi, logits, L, fit_chroma=True) -> Laplace:
     if fit_chroma:
         to_parameters[2 * N_CONTROL * R:, k:] = np.eye(2 * R)
     return Laplace(likelihood, prior, to_parameters, time.perf_counter() - t0)
+
+
+#: the posterior probability of no highlight (:func:`highlight_doubt`) from which a
+#: recovered highlight is flagged (``Recovery.flags``); chosen on validation: the
+#: middle of the probabilities that flag at least 80 % of the near-Lambertian
+#: materials recovered glossy and at most 10 % of the rest
+HIGHLIGHT_DOUBT = 0.22
+
+
+def highlight_doubt(material) -> float | None:
+    """For a recovered ``material`` (with its covariance) whose MAP has a highlight
+    (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.highlight_ratio` at least
+    ``NO_HIGHLIGHT``): the posterior's probability that it has none
+    (:meth:`~mi_dsbrdf.brdf.dsbrdf.Material.no_highlight_probability`, at the
+    shipped temperature). None for a MAP without a highlight."""
+    if material.highlight_ratio() < NO_HIGHLIGHT:
+        return None
+    return material.no_highlight_probability()
 
 
 #: the temperature of the map's spread (:func:`illumination_spread`), chosen on
