@@ -122,10 +122,13 @@ def photograph(folder, material, probe, res, args):
     # the scene as a user gives it: the film at the photograph's size (the light's
     # values are not used, but its file must load; a point light's distance is kept)
     scene_file = os.path.join(folder, "scene.xml")
+    user = xml.replace('name="res" value="128"', 'name="res" value="%d"' % res)
+    if args.light == "envmap":
+        user = user.replace('value="textures/sky.exr"', 'value="%s"' % light["envmap"])
+    user = user.replace('name="light_position" value="2.5, 2.0, 3.0"',
+                        'name="light_position" value="0, 0, %r"' % POINT_DISTANCE)
     with open(scene_file, "w") as f:
-        f.write(xml.replace('name="res" value="128"', 'name="res" value="%d"' % res).replace(
-            'value="textures/sky.exr"', 'value="%s"' % os.path.join(args.data, "envmaps", probe)).replace(
-            'name="light_position" value="2.5, 2.0, 3.0"', 'name="light_position" value="0, 0, %r"' % POINT_DISTANCE))
+        f.write(user)
     return scene_file, image
 
 

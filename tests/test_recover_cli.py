@@ -205,3 +205,20 @@ def test_progress_shows_one_bar_per_pass_with_its_total(capsys):
     assert ends == {"recover: starts": "%d/%d" % (starts, starts), "recover: grey pass": "2/3",
                     "recover: colour pass": "3/3", "recover: second route, starts": "%d/%d" % (starts, starts),
                     "recover: second route, colour pass": "3/3"}
+
+
+def test_a_flagged_highlight_names_where_it_lights_the_object(case, monkeypatch, tmp_path, capsys):
+    """With the flag's threshold at 0, gold's highlight is flagged: log.json and the
+    command line name the sphere's upper right, where the light (travelling along
+    -0.5, -0.5, -0.71: from the upper right, in the camera's frame) mirrors towards
+    the camera; the extra re-render is its own stage."""
+    from mi_dsbrdf.inference import uncertainty
+    d, _ = case
+    monkeypatch.setattr(uncertainty, "HIGHLIGHT_DOUBT", 0.0)
+    assert main(["recover", "--scene", str(d / "scene.xml"), "--image", str(d / "image.exr"),
+                 "--out", str(tmp_path / "out"), "--max-rounds", "2", "--block-iters", "20"]) == 0
+    log = json.loads((tmp_path / "out" / "log.json").read_text())
+    (flag,) = log["flags"]
+    assert "on the object's upper right" in flag and "\n" not in flag
+    assert list(log["stages"])[-2:] == ["highlight place", "save"]
+    assert "  warning: " + flag in capsys.readouterr().out.splitlines()

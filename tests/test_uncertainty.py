@@ -185,9 +185,28 @@ def test_a_highlight_the_posterior_doubts_is_flagged_and_a_sure_one_is_not():
     doubted = recovery(weak.with_covariance(np.sqrt(0.3) * np.eye(n)))
     assert HIGHLIGHT_DOUBT <= doubted.highlight_doubt < 1.0
     assert len(doubted.flags) == 1 and "highlight" in doubted.flags[0] and "\n" not in doubted.flags[0]
+    assert "on the object's upper left" in doubted.highlight_flag("upper left")
     assert recovery(weak.with_covariance(np.sqrt(1e-4) * np.eye(n))).flags == []
     # a MAP without a highlight has nothing to doubt
     fabric = model.library_material("white-fabric")
     assert recovery(fabric.with_covariance(np.sqrt(0.3) * np.eye(n))).highlight_doubt is None
     with pytest.raises(MaterialError):
         weak.no_highlight_probability()
+
+
+def test_the_place_a_highlight_lights_is_named_from_the_objects_centre():
+    """brightest_place: the centroid of the pixels within half of the largest excess,
+    from the centre of the used pixels' bounding box: "centre" near it, else the
+    nearest of eight directions (row 0 at the top)."""
+    from mi_dsbrdf.app.recover import brightest_place
+    yy, xx = np.mgrid[0:30, 0:30]
+    used = (yy - 15) ** 2 + (xx - 15) ** 2 < 12 ** 2
+
+    def spot(y, x):
+        return np.exp(-((yy - y) ** 2 + (xx - x) ** 2) / 4.0)
+    assert brightest_place(spot(8, 8), used) == "upper left"
+    assert brightest_place(spot(24, 15), used) == "lower"
+    assert brightest_place(spot(15, 25), used) == "right"
+    assert brightest_place(spot(22, 22), used) == "lower right"
+    assert brightest_place(spot(16, 14), used) == "centre"
+    assert brightest_place(spot(15, 15) - spot(8, 8), used) == "centre"     # only the excess counts

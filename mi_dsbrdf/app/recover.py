@@ -144,6 +144,15 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     view = lit.with_map_size(lit.map_size) if needs.envmap_block else lit
     material = rec.material.with_observed(observed_directions(view, L, np.nonzero(keep.reshape(-1)[view.pixels])[0]))
     stages["observed directions"] = stage_row(t2)
+    used = grid.repeat(keep)
+    flags = rec.flags
+    if rec.highlight_flag() is not None:
+        # a doubted highlight: where on the object it lights (against the posterior's
+        # flattest sample)
+        t3 = time.perf_counter()
+        flags = [rec.highlight_flag(highlight_place(grid, lit, rec.material, L, cfg.map_pairs, on_object,
+                                                    rerender, used))]
+        stages["highlight place"] = stage_row(t3)
     rows = rec.log
     from mi_dsbrdf import __version__
     log = {"version": __version__, "config": dataclasses.asdict(cfg),
@@ -154,12 +163,43 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
            "working_grid": grid.log(),
            "seconds": rec.seconds,
            "unseen_texels": rows[-1].get("unseen_texels") if rows else None,
-           "highlight_doubt": rec.highlight_doubt, "flags": rec.flags}
-    used = grid.repeat(keep)
+           "highlight_doubt": rec.highlight_doubt, "flags": flags}
     log["residual"] = relative_residual(obs, rerender, used)
     return Result(material=material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
                   image=obs, used=used, rerender=rerender, scene_source=source,
                   illumination_std=rec.illumination_spread)
+
+
+def highlight_place(grid, lit, material, L, pairs, on_object, rerender, used) -> str:
+    """Where on the object ``material``'s highlight lights, in words
+    (:func:`brightest_place`): the used pixels its ``rerender`` brightens most over
+    the posterior's sample with the weakest highlight (of the samples
+    :meth:`~mi_dsbrdf.brdf.dsbrdf.Material.no_highlight_probability` draws), both
+    scaled to the same sum."""
+    flattest = min(material.sample(128, seed=1), key=lambda m: m.highlight_ratio())
+    other = grid_rerender(grid, lit, flattest, L, pairs, on_object)
+    a, b = rerender.mean(axis=2), other.mean(axis=2)
+    b = b * a[used].sum() / max(float(b[used].sum()), 1e-300)
+    return brightest_place(a - b, used)
+
+
+#: the eight directions from the object's centre :func:`brightest_place` names,
+#: counter-clockwise from the right in 45 degree sectors
+COMPASS = ("right", "upper right", "upper", "upper left", "left", "lower left", "lower", "lower right")
+
+
+def brightest_place(excess, used) -> str:
+    """"centre", "upper left", "right", ...: where the pixels of ``excess`` (H, W)
+    within half of its largest value over ``used`` (H, W) bool lie: their centroid
+    against the used pixels' bounding box, "centre" within 0.2 of its half-size of
+    the middle, else one of :data:`COMPASS` (row 0 is the image's top)."""
+    rows, cols = np.nonzero(used)
+    y, x = np.nonzero(used & (excess >= 0.5 * float(excess[used].max())))
+    dx = (x.mean() - (cols.min() + cols.max()) / 2) / max((cols.max() - cols.min()) / 2, 1)
+    dy = ((rows.min() + rows.max()) / 2 - y.mean()) / max((rows.max() - rows.min()) / 2, 1)
+    if np.hypot(dx, dy) < 0.2:
+        return "centre"
+    return COMPASS[int(np.round(np.degrees(np.arctan2(dy, dx)) / 45.0)) % 8]
 
 
 def relative_residual(image, rerender, used, band=256) -> float:

@@ -69,11 +69,13 @@ class Result:
     seen : (H, W) bool texels some observed pixel sees, or None
     log : {"version", "config" (the Config's fields), "image_size" [H, W],
         "map_size" [H, W] (None without a map), "stages" {"checks", "inference",
-        "re-render", "observed directions": {"seconds", "peak_memory_mb"}} ("save" is added in log.json),
+        "re-render", "observed directions", and "highlight place" when a highlight is flagged:
+        {"seconds", "peak_memory_mb"}} ("save" is added in log.json),
         "needs": one line per decision about the scene, "rounds": one dict per
         logged round (posterior terms, seconds), "seconds", "residual" (the
         re-render's relative L1 from the image over the used pixels),
-        "highlight_doubt", "flags" (``Recovery``'s), ...}
+        "highlight_doubt" (``Recovery``'s), "flags" (``Recovery.flags``, a doubted
+        highlight with the place on the object it lights), ...}
     image : (H, W, 3) float64 observed image (linear); used : (H, W) bool, the
         pixels inference used (an image larger than ``Config.working_pixels``: the
         pixels of the used blocks, :mod:`~mi_dsbrdf.app.working_grid`); rerender :

@@ -62,17 +62,24 @@ class Recovery:
 
     @property
     def flags(self) -> list:
-        """One line for each part of the answer the photograph may not support: a
-        highlight whose :attr:`highlight_doubt` is at least
+        """One line for each part of the answer the photograph may not support: so
+        far a doubted highlight (:meth:`highlight_flag`)."""
+        line = self.highlight_flag()
+        return [] if line is None else [line]
+
+    def highlight_flag(self, where=None) -> str | None:
+        """One line when the recovered highlight's :attr:`highlight_doubt` is at least
         :data:`~mi_dsbrdf.inference.uncertainty.HIGHLIGHT_DOUBT` (near-Lambertian
-        materials, under a sun above all, can come back glossy)."""
+        materials, under a sun above all, can come back glossy), else None;
+        ``where``: the place on the object it lights, in words, if known."""
         from mi_dsbrdf.inference.uncertainty import HIGHLIGHT_DOUBT
         if self.highlight_doubt is None or self.highlight_doubt < HIGHLIGHT_DOUBT:
-            return []
-        return ["the highlight may be the prior's, not the photograph's: the posterior gives %.0f %% to a material "
+            return None
+        return ("the highlight%s may be the prior's, not the photograph's: the posterior gives %.0f %% to a material "
                 "with none (peak / off-peak at the mirror direction below %.1f; the answer's is %.1f); "
-                "material.png shows the band" % (100 * self.highlight_doubt, NO_HIGHLIGHT,
-                                                 self.material.highlight_ratio())]
+                "material.png shows the band" % ("" if where is None else " (on the object's %s)" % where,
+                                                 100 * self.highlight_doubt, NO_HIGHLIGHT,
+                                                 self.material.highlight_ratio()))
 
     @property
     def seconds(self) -> float:
