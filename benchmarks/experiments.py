@@ -24,6 +24,8 @@ this package installed, ``--data`` at the same path and one thread each,
     .venv/bin/python benchmarks/experiments.py --full
     .venv/bin/python benchmarks/experiments.py --report     # -> docs/experiments.md, docs/experiments/*.png
     .venv/bin/python benchmarks/experiments.py --compare BEFORE_DIR   # markdown: BEFORE_DIR against --out, case by case
+    .venv/bin/python benchmarks/experiments.py --groups point --materials M ... --out DIR   # point lights only
+    .venv/bin/python benchmarks/experiments.py --posterior --out DIR   # their posterior band at each temperature
 
 ``--compare`` pairs two runs case by case (the code before a change, run with
 ``--out BEFORE_DIR`` from a worktree of it, against the code after).
@@ -38,8 +40,9 @@ import sys
 
 import numpy as np
 
-from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, OUT as OUT_ROOT, have_data, make_case, measure,
-                                                  run_on_cluster, tonemap)
+from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN, OUT as OUT_ROOT,
+                                                  have_data, make_case, measure, posterior_table, run_on_cluster,
+                                                  tonemap)
 
 OUT = os.path.join(OUT_ROOT, "experiments")
 QUICK_MATERIALS = ["blue-acrylic", "gold-metallic-paint", "red-fabric", "pvc"]
@@ -347,6 +350,21 @@ def compare(before, after) -> str:
     return "\n".join(md) + "\n"
 
 
+def posterior_summary(results_dir) -> str:
+    """Markdown: the posterior band of the point-light cases with priors in
+    ``results_dir`` against the truth at each temperature
+    (:func:`~mi_dsbrdf.evaluation.benchmark_cases.posterior_table`; on the
+    validation materials, the choice of
+    ``mi_dsbrdf.inference.uncertainty.LIGHT_POSTERIOR_TEMPERATURE``), and whom the
+    highlight flag fires on."""
+    rows = [r for r in load(results_dir) if r["case"]["kind"] == "point" and r["case"].get("priors", True)]
+    glossy = [r for r in rows if r["truth_highlight_ratio"] < NEAR_LAMBERTIAN
+              and r["highlight_ratio"] >= HIGHLIGHT_LIMIT * r["truth_highlight_ratio"]]
+    return "%s\n\nThe highlight flag fires on %d of %d near-Lambertian materials recovered glossy and on %d of %d " \
+        "other cases.\n" % (posterior_table(rows), sum(bool(r.get("flags")) for r in glossy), len(glossy),
+                            sum(bool(r.get("flags")) for r in rows if r not in glossy), len(rows) - len(glossy))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--full", action="store_true", help="every MERL material, angle and probe")
@@ -361,7 +379,12 @@ def main(argv=None):
     ap.add_argument("--docs", default=DOCS, help="where --report writes (default %(default)s)")
     ap.add_argument("--compare", metavar="BEFORE_DIR",
                     help="only print, as markdown, the results in BEFORE_DIR against those in --out, case by case")
+    ap.add_argument("--posterior", action="store_true",
+                    help="only print the posterior band's table of the point cases with priors in --out")
     args = ap.parse_args(argv)
+    if args.posterior:
+        print(posterior_summary(args.out))
+        return
     if args.report:
         print("wrote", write_report(args.out, args.docs))
         return

@@ -67,8 +67,9 @@ import sys
 
 import numpy as np
 
-from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN, OUT as OUT_ROOT,
-                                                  REPORT_MATERIALS, REPORT_PROBES, RESULTS, ROOT,
+from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN,
+                                                  OUT as OUT_ROOT, REPORT_MATERIALS, REPORT_PROBES, RESULTS, ROOT,
+                                                  own_rows, posterior_rows, posterior_table,
                                                   VALIDATION_MATERIALS, VALIDATION_PROBES, have_data, make_case,
                                                   parse_config, parse_setting, run_on_cluster, setting_name,
                                                   tonemap)
@@ -218,59 +219,6 @@ def summary(folder) -> str:
     return "\n".join(md) + "\n"
 
 
-#: the target band of the posterior's coverage of the truth on observed (theta_h,
-#: theta_d) cells (median over cases); the temperature chosen on validation is the
-#: one whose median lies nearest the band's middle
-COVERAGE_TARGET = (0.75, 0.95)
-
-
-def posterior_rows(rows) -> list:
-    """This tool's results that carry a posterior band (``posterior``)."""
-    return [r for r in own_rows(rows) if "posterior" in r]
-
-
-def posterior_table(rows) -> str:
-    """Markdown: per temperature, the median over cases of the 90 % band's coverage
-    of the truth and its width (log(rho + 1e-6)), on observed cells and elsewhere,
-    and the median of the cases' width ratio; then the chosen temperature and the
-    Laplace approximation's share of a recovery's time."""
-    rows = posterior_rows(rows)
-    if not rows:
-        return ""
-    temps = sorted(rows[0]["posterior"]["temperature"], key=float)
-    md = ["| temperature | coverage, observed | coverage, unobserved | width, observed | width, unobserved | "
-          "width observed / unobserved | map coverage |", "|---|---|---|---|---|---|---|"]
-    for t in temps:
-        b = [r["posterior"]["temperature"][t] for r in rows]
-        med = {k: float(np.nanmedian([x.get(k, np.nan) for x in b])) for k in b[0]}
-        ratio = float(np.nanmedian([x["width_observed"] / x["width_unobserved"] for x in b]))
-        shipped = [name for name, key in (("material", "default"), ("map", "map_default"))
-                   if float(t) == rows[0]["posterior"].get(key)]
-        md.append("| %s%s | %.2f | %.2f | %.2f | %.2f | %.2f | %s |" % (
-            t, " (shipped: %s)" % ", ".join(shipped) if shipped else "", med["coverage_observed"],
-            med["coverage_unobserved"], med["width_observed"], med["width_unobserved"], ratio,
-            "%.2f" % med["map_coverage"] if "map_coverage" in med else "–"))
-    share = np.median([r["posterior"]["seconds"] / r["seconds"] for r in rows])
-    md += ["", "%d cases; the temperature whose median coverage is nearest %.2f: %s for the material (observed "
-           "cells), %s for the map. The posterior (the material's and the map's) takes %.1f %% of a recovery's time "
-           "(median)."
-           % (len(rows), np.mean(COVERAGE_TARGET), choose_temperature(rows),
-              choose_temperature(rows, "map_coverage"), 100 * share)]
-    return "\n".join(md)
-
-
-def choose_temperature(rows, measure="coverage_observed") -> str:
-    """The temperature (a key of ``posterior.temperature``) whose median ``measure``
-    (the material's coverage on observed cells, or ``map_coverage``) over ``rows``
-    lies nearest the middle of COVERAGE_TARGET; "–" if no row has it."""
-    rows = [r for r in posterior_rows(rows) if all(measure in b for b in r["posterior"]["temperature"].values())]
-    if not rows:
-        return "–"
-    middle = np.mean(COVERAGE_TARGET)
-    return min(rows[0]["posterior"]["temperature"], key=lambda t: abs(float(np.nanmedian(
-        [r["posterior"]["temperature"][t][measure] for r in rows])) - middle))
-
-
 #: the highlight flag's targets: the share of near-Lambertian materials recovered
 #: glossy it fires on (at least), and of the other cases (at most)
 FLAG_TARGETS = (0.8, 0.1)
@@ -387,11 +335,6 @@ def overruled(name) -> str | None:
     parsed = parse_setting(name)
     why = [w for bad, w in OVERRULED.items() if parse_setting(bad) == parsed]
     return why[0] if why else None
-
-
-def own_rows(rows) -> list:
-    """This tool's results among ``rows`` (a report folder also holds the Adam baselines')."""
-    return [r for r in rows if r["case"].get("method", "dsbrdf") == "dsbrdf"]
 
 
 def near_lambertian_clean(rows) -> tuple:

@@ -682,3 +682,21 @@ def test_natural_light_counts_whom_the_highlight_flag_fires_on_and_the_threshold
     assert natural_light.choose_doubt([row(1.1, 3.0, 0.1, False)] + rest[:17] + [row(40.0, 50.0, 0.5, True)] * 3) \
         is None
     assert "fires on 4 of 5" in natural_light.flag_text(rows) and "1 of 20" in natural_light.flag_text(rows)
+
+
+def test_the_posterior_table_names_the_temperature_whose_coverage_lies_nearest_the_targets_middle():
+    """choose_temperature: the median coverage on observed cells nearest the middle
+    of COVERAGE_TARGET (0.85); posterior_table marks the shipped temperature and
+    names the chosen one; only this tool's rows with a posterior count."""
+    def row(scale):
+        return {"case": {"method": "dsbrdf"}, "seconds": 2.0,
+                "posterior": {"default": 4000.0, "map_default": 300.0, "seconds": 0.1, "temperature": {
+                    t: {"coverage_observed": min(1.0, c * scale), "coverage_unobserved": 0.9,
+                        "width_observed": 1.0, "width_unobserved": 4.0}
+                    for t, c in (("1000", 0.5), ("4000", 0.7), ("10000", 0.83), ("30000", 0.97))}}}
+    rows = [row(0.95), row(1.0), row(1.05), {"case": {"method": "principled-adam"}}]
+    assert bc.choose_temperature(rows) == "10000"
+    table = bc.posterior_table(rows)
+    assert "| 4000 (shipped: material) | 0.70 |" in table and "3 cases" in table
+    assert "0.85: 10000 for the material" in table and "5.0 % of a recovery" in table
+    assert bc.choose_temperature([row(1.0)], "map_coverage") == "–"

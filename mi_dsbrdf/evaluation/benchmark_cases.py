@@ -9,7 +9,9 @@
 * the natural-light case sets (:data:`VALIDATION_MATERIALS` x
   :data:`VALIDATION_PROBES`, :data:`REPORT_MATERIALS` x :data:`REPORT_PROBES`)
   and the names of settings (:func:`setting_name`, :func:`parse_config`);
-* helpers of the reports (:func:`measure`, :func:`tonemap`).
+* helpers of the reports (:func:`measure`, :func:`tonemap`), and the posterior
+  band's table with the temperature its coverage chooses (:func:`posterior_table`,
+  :func:`choose_temperature`).
 """
 from __future__ import annotations
 
@@ -224,3 +226,63 @@ def measure(r, key):
 def tonemap(img, ref) -> np.ndarray:
     """An HDR image for display: over ``ref`` (its white), clipped to [0, 1], gamma 2.2."""
     return np.clip(np.asarray(img, np.float64) / max(ref, 1e-12), 0, 1) ** (1 / 2.2)
+
+
+# --- the posterior band's summary (natural_light.py, experiments.py --posterior) ---------------
+
+def own_rows(rows) -> list:
+    """This tool's results among ``rows`` (a report folder also holds the Adam baselines')."""
+    return [r for r in rows if r["case"].get("method", "dsbrdf") == "dsbrdf"]
+
+
+#: the target band of the posterior's coverage of the truth on observed (theta_h,
+#: theta_d) cells (median over cases); the temperature chosen on validation is the
+#: one whose median lies nearest the band's middle
+COVERAGE_TARGET = (0.75, 0.95)
+
+
+def posterior_rows(rows) -> list:
+    """This tool's results that carry a posterior band (``posterior``)."""
+    return [r for r in own_rows(rows) if "posterior" in r]
+
+
+def posterior_table(rows) -> str:
+    """Markdown: per temperature, the median over cases of the 90 % band's coverage
+    of the truth and its width (log(rho + 1e-6)), on observed cells and elsewhere,
+    and the median of the cases' width ratio; then the chosen temperature and the
+    Laplace approximation's share of a recovery's time."""
+    rows = posterior_rows(rows)
+    if not rows:
+        return ""
+    temps = sorted(rows[0]["posterior"]["temperature"], key=float)
+    md = ["| temperature | coverage, observed | coverage, unobserved | width, observed | width, unobserved | "
+          "width observed / unobserved | map coverage |", "|---|---|---|---|---|---|---|"]
+    for t in temps:
+        b = [r["posterior"]["temperature"][t] for r in rows]
+        med = {k: float(np.nanmedian([x.get(k, np.nan) for x in b])) for k in b[0]}
+        ratio = float(np.nanmedian([x["width_observed"] / x["width_unobserved"] for x in b]))
+        shipped = [name for name, key in (("material", "default"), ("map", "map_default"))
+                   if float(t) == rows[0]["posterior"].get(key)]
+        md.append("| %s%s | %.2f | %.2f | %.2f | %.2f | %.2f | %s |" % (
+            t, " (shipped: %s)" % ", ".join(shipped) if shipped else "", med["coverage_observed"],
+            med["coverage_unobserved"], med["width_observed"], med["width_unobserved"], ratio,
+            "%.2f" % med["map_coverage"] if "map_coverage" in med else "–"))
+    share = np.median([r["posterior"]["seconds"] / r["seconds"] for r in rows])
+    md += ["", "%d cases; the temperature whose median coverage is nearest %.2f: %s for the material (observed "
+           "cells), %s for the map. The posterior (the material's and the map's) takes %.1f %% of a recovery's time "
+           "(median)."
+           % (len(rows), np.mean(COVERAGE_TARGET), choose_temperature(rows),
+              choose_temperature(rows, "map_coverage"), 100 * share)]
+    return "\n".join(md)
+
+
+def choose_temperature(rows, measure="coverage_observed") -> str:
+    """The temperature (a key of ``posterior.temperature``) whose median ``measure``
+    (the material's coverage on observed cells, or ``map_coverage``) over ``rows``
+    lies nearest the middle of COVERAGE_TARGET; "–" if no row has it."""
+    rows = [r for r in posterior_rows(rows) if all(measure in b for b in r["posterior"]["temperature"].values())]
+    if not rows:
+        return "–"
+    middle = np.mean(COVERAGE_TARGET)
+    return min(rows[0]["posterior"]["temperature"], key=lambda t: abs(float(np.nanmedian(
+        [r["posterior"]["temperature"][t][measure] for r in rows])) - middle))

@@ -99,14 +99,14 @@ from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
-from mi_dsbrdf.inference.uncertainty import MAP_TEMPERATURE, POSTERIOR_TEMPERATURE
+from mi_dsbrdf.inference.uncertainty import MAP_TEMPERATURE
 from mi_dsbrdf.model import model_file as model_data
 from mi_dsbrdf.model.build import DEFAULT_K, GMM, build_from_fits, gmm_structure, save_model, stored_fits
 from mi_dsbrdf.model.samples import samples_from_table
 
 #: the posterior band scored (``posterior``) and the temperatures it is scored at beside the shipped ones
 BAND_LEVEL = 0.9
-TEMPERATURES = (30, 100, 300, 1000, 2000, 4000, 10000, 30000)
+TEMPERATURES = (30, 100, 300, 1000, 2000, 4000, 10000, 15000, 20000, 30000)
 #: probes used for relighting (the first two that differ from the case's probe)
 RELIGHT_PROBES = ["probulator/pisa.hdr", "probulator/uffizi.hdr", "probulator/ennis.hdr"]
 #: point light of the point cases: distance from the object's centre, intensity (W/sr)
@@ -336,10 +336,10 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     if laplace is not None:
         out["highlight_doubt"], out["flags"] = result.highlight_doubt, result.flags
         # the posterior band at each temperature, the shipped ones among them
-        out["posterior"] = {"level": BAND_LEVEL, "default": POSTERIOR_TEMPERATURE, "map_default": MAP_TEMPERATURE,
+        out["posterior"] = {"level": BAND_LEVEL, "default": laplace.temperature, "map_default": MAP_TEMPERATURE,
                             "seconds": posterior_seconds, "temperature": posterior_scores(
                                 material, laplace, samples, where, scale,
-                                sorted(set(TEMPERATURES) | {POSTERIOR_TEMPERATURE, MAP_TEMPERATURE}), BAND_LEVEL,
+                                sorted(set(TEMPERATURES) | {laplace.temperature, MAP_TEMPERATURE}), BAND_LEVEL,
                                 None if spread is None else (recovered_map, small, seen, spread, MAP_TEMPERATURE))}
     if getattr(material, "psi", None) is not None:
         out["material"] = {"psi": material.psi.tolist(), "chromaticity": material.chromaticity.tolist()}

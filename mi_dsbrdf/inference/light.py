@@ -27,7 +27,7 @@ from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior, angles_from_direction, direction_from_angles
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
-from mi_dsbrdf.inference.uncertainty import highlight_doubt, laplace
+from mi_dsbrdf.inference.uncertainty import LIGHT_POSTERIOR_TEMPERATURE, highlight_doubt, laplace
 
 #: directions of the global search (Fibonacci lattice) and how many of them go on
 SEARCH_DIRECTIONS, SEARCH_KEEP = 64, 6
@@ -200,7 +200,8 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     # the material's posterior with the light at its MAP
     t_posterior = time.perf_counter()
     post.aim(theta, phi)
-    posterior_of_material = laplace(post, psi, logits, np.full((1, 3), np.exp(log_i)), fit_chroma=colour)
+    posterior_of_material = laplace(post, psi, logits, np.full((1, 3), np.exp(log_i)), fit_chroma=colour,
+                                    temperature=LIGHT_POSTERIOR_TEMPERATURE)
     material = Material.from_basis(model.basis, psi, chroma, name="recovered").with_covariance(
         posterior_of_material.factor())
     return Recovery(material=material, psi=psi, chromaticity=chroma, light=light, log=rows,

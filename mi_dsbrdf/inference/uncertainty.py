@@ -31,6 +31,14 @@ def fisher_scale(post, d) -> float:
     return post.scale * max(float(np.mean(np.abs(d))), post.kink)
 
 
+#: the temperature of the material's posterior covariance (:meth:`Laplace.factor`)
+#: under an illumination map; chosen on validation for the 90 % band's coverage of the truth
+POSTERIOR_TEMPERATURE = 4000.0
+#: the same under a point or directional light (one direction a pixel shows less of
+#: the BRDF, and the answer's error outweighs the curvature more); chosen alike
+LIGHT_POSTERIOR_TEMPERATURE = 4000.0
+
+
 @dataclasses.dataclass(frozen=True)
 class Laplace:
     """The Laplace approximation of the posterior of the material at its MAP,
@@ -53,22 +61,26 @@ class Laplace:
     alternatives : ((delta (LOBE_PARAMETERS R,), energy), ...): other modes the
         search found, as their parameters less the MAP's and their negative log
         posterior above the MAP's (>= 0)
+    temperature : the shipped temperature :meth:`factor` tempers with
+        (:data:`POSTERIOR_TEMPERATURE` under a map, :data:`LIGHT_POSTERIOR_TEMPERATURE`
+        under a point or directional light)
     """
     likelihood: np.ndarray
     prior: np.ndarray
     to_parameters: np.ndarray
     seconds: float = 0.0
     alternatives: tuple = ()
+    temperature: float = POSTERIOR_TEMPERATURE
 
     def factor(self, temperature=None) -> np.ndarray:
         """(LOBE_PARAMETERS R, n) F with the parameters' covariance F F^T =
         temperature x A (likelihood + prior)^-1 A^T, A = ``to_parameters``: the
-        posterior tempered, p^(1 / temperature) (default
-        :data:`POSTERIOR_TEMPERATURE`; neighbouring pixels' residuals are not
+        posterior tempered, p^(1 / temperature) (default :attr:`temperature`;
+        neighbouring pixels' residuals are not
         independent, and the priors' weights grow with the pixels), plus one
         column a mode in ``alternatives`` (F has n + their number columns).
         Eigenvalues of the Hessian are floored at EIGEN_FLOOR times the largest."""
-        t = POSTERIOR_TEMPERATURE if temperature is None else float(temperature)
+        t = self.temperature if temperature is None else float(temperature)
         w, V = np.linalg.eigh(self.likelihood + self.prior)
         w = np.maximum(w, EIGEN_FLOOR * max(float(w.max()), 1e-300))
         F = self.to_parameters @ (V * np.sqrt(t / w))
@@ -92,21 +104,19 @@ def mode_weights(gaps, temperature=None) -> np.ndarray:
     return p / (1.0 + p.sum())
 
 
-#: the temperature of the material's posterior covariance (:meth:`Laplace.factor`);
-#: chosen on validation for the 90 % band's coverage of the truth
-POSTERIOR_TEMPERATURE = 4000.0
 #: the smallest eigenvalue of the Hessian the covariance keeps, relative to the largest
 EIGEN_FLOOR = 1e-9
 
 
-def laplace(post, psi, logits, L, fit_chroma=True) -> Laplace:
+def laplace(post, psi, logits, L, fit_chroma=True, temperature=POSTERIOR_TEMPERATURE) -> Laplace:
     """The :class:`Laplace` approximation at the MAP (psi (k,), chromaticity
     variables (R, 2)) under the light L (T, 3) (the posterior's light direction
     as set), over the reflectance block's pixels scaled to stand for all usable
     ones. One Jacobian of the image (the cost of one Levenberg-Marquardt step).
 
     Its likelihood part is sum_i J_i J_i^T / :func:`fisher_scale`, J the
-    Jacobian of the log pixel values."""
+    Jacobian of the log pixel values; ``temperature``: the shipped one it keeps
+    (:attr:`Laplace.temperature`)."""
     t0 = time.perf_counter()
     k, R = psi.size, logits.shape[0]
     jac = post.refl.lobes.jacobian(post.material(psi, logits), L)
@@ -128,7 +138,7 @@ def laplace(post, psi, logits, L, fit_chroma=True) -> Laplace:
     to_parameters[:2 * N_CONTROL * R, :k] = to_controls
     if fit_chroma:
         to_parameters[2 * N_CONTROL * R:, k:] = np.eye(2 * R)
-    return Laplace(likelihood, prior, to_parameters, time.perf_counter() - t0)
+    return Laplace(likelihood, prior, to_parameters, time.perf_counter() - t0, temperature=temperature)
 
 
 #: the posterior probability of no highlight (:func:`highlight_doubt`) from which a
