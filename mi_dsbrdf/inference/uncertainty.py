@@ -35,8 +35,9 @@ def fisher_scale(post, d) -> float:
 #: under an illumination map; chosen on validation for the 90 % band's coverage of the truth
 POSTERIOR_TEMPERATURE = 4000.0
 #: the same under a point or directional light (one direction a pixel shows less of
-#: the BRDF, and the answer's error outweighs the curvature more); chosen alike
-LIGHT_POSTERIOR_TEMPERATURE = 4000.0
+#: the BRDF, and the answer's error outweighs the curvature more); chosen alike, on
+#: the validation materials under point lights
+LIGHT_POSTERIOR_TEMPERATURE = 15000.0
 
 
 @dataclasses.dataclass(frozen=True)
