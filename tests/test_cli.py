@@ -11,11 +11,16 @@ from mi_dsbrdf.app.cli import main
 from mi_dsbrdf.app.scenes import SCENE_DIR
 
 
-def test_demo_recovers_and_reports_and_never_overwrites(tmp_path):
+def test_demo_recovers_and_reports_and_never_overwrites(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--res", "24", "--map-size", "4x8", "--max-rounds", "1",
                  "--block-iters", "3", "--spp", "16"]) == 0
     report = json.loads((out / "report.json").read_text())
+    # log.json's flags: in the report, its table, and each as a warning line
+    log = json.loads((out / "recovered" / "log.json").read_text())
+    assert report["flags"] == log["flags"] and "what the photograph may not support" in (out / "report.md").read_text()
+    printed = capsys.readouterr().out.splitlines()
+    assert [line for line in printed if line.startswith("  warning: ")] == ["  warning: " + f for f in log["flags"]]
     for key in ("brdf_eq20_paper", "brdf_eq20_cosine", "mean_material_eq20_paper", "illumination_cosine_after_scale",
                 "illumination_paper_after_scale", "constant_map_cosine_after_scale", "constant_map_paper_after_scale",
                 "relit_log_rmse_after_scale", "mean_material_relit_log_rmse_after_scale"):

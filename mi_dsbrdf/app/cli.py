@@ -82,6 +82,8 @@ def cmd_demo(args):
               r["brdf_eq20_cosine"], r["mean_material_eq20_cosine"], r["illumination_cosine_after_scale"],
               r["constant_map_cosine_after_scale"], r["relit_log_rmse_after_scale"],
               r["mean_material_relit_log_rmse_after_scale"], os.path.join(args.out, "report.md")))
+    for flag in r["flags"]:
+        print("  warning: " + flag)
 
 
 def cmd_build_model(args):
