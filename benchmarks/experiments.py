@@ -40,9 +40,8 @@ import sys
 
 import numpy as np
 
-from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN, OUT as OUT_ROOT,
-                                                  have_data, make_case, measure, posterior_table, run_on_cluster,
-                                                  tonemap)
+from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, OUT as OUT_ROOT, have_data, make_case, measure,
+                                                  posterior_table, recovered_glossy, run_on_cluster, tonemap)
 
 OUT = os.path.join(OUT_ROOT, "experiments")
 QUICK_MATERIALS = ["blue-acrylic", "gold-metallic-paint", "red-fabric", "pvc"]
@@ -358,8 +357,7 @@ def posterior_summary(results_dir) -> str:
     ``mi_dsbrdf.inference.uncertainty.LIGHT_POSTERIOR_TEMPERATURE``), and whom the
     highlight flag fires on."""
     rows = [r for r in load(results_dir) if r["case"]["kind"] == "point" and r["case"].get("priors", True)]
-    glossy = [r for r in rows if r["truth_highlight_ratio"] < NEAR_LAMBERTIAN
-              and r["highlight_ratio"] >= HIGHLIGHT_LIMIT * r["truth_highlight_ratio"]]
+    glossy = [r for r in rows if recovered_glossy(r)]
     return "%s\n\nThe highlight flag fires on %d of %d near-Lambertian materials recovered glossy and on %d of %d " \
         "other cases.\n" % (posterior_table(rows), sum(bool(r.get("flags")) for r in glossy), len(glossy),
                             sum(bool(r.get("flags")) for r in rows if r not in glossy), len(rows) - len(glossy))

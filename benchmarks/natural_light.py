@@ -69,7 +69,7 @@ import numpy as np
 
 from mi_dsbrdf.evaluation.benchmark_cases import (DATA, DOCS, HIGHLIGHT_LIMIT, NEAR_LAMBERTIAN,
                                                   OUT as OUT_ROOT, REPORT_MATERIALS, REPORT_PROBES, RESULTS, ROOT,
-                                                  own_rows, posterior_rows, posterior_table,
+                                                  own_rows, posterior_rows, posterior_table, recovered_glossy,
                                                   VALIDATION_MATERIALS, VALIDATION_PROBES, have_data, make_case,
                                                   parse_config, parse_setting, run_on_cluster, setting_name,
                                                   tonemap)
@@ -227,13 +227,6 @@ FLAG_TARGETS = (0.8, 0.1)
 def flag_rows(rows) -> list:
     """This tool's results that carry ``highlight_doubt`` (None: no highlight to doubt)."""
     return [r for r in own_rows(rows) if "highlight_doubt" in r]
-
-
-def recovered_glossy(r) -> bool:
-    """A near-Lambertian material (measured peak / off-peak below NEAR_LAMBERTIAN)
-    recovered with a highlight (at least HIGHLIGHT_LIMIT times the measured ratio)."""
-    return r["truth_highlight_ratio"] < NEAR_LAMBERTIAN and r["highlight_ratio"] >= HIGHLIGHT_LIMIT * r[
-        "truth_highlight_ratio"]
 
 
 def flag_counts(rows, doubt=None) -> tuple:

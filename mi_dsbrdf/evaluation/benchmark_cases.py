@@ -241,6 +241,13 @@ def own_rows(rows) -> list:
 COVERAGE_TARGET = (0.75, 0.95)
 
 
+def recovered_glossy(r) -> bool:
+    """A near-Lambertian material (measured peak / off-peak below NEAR_LAMBERTIAN)
+    recovered with a highlight (at least HIGHLIGHT_LIMIT times the measured ratio)."""
+    return r["truth_highlight_ratio"] < NEAR_LAMBERTIAN and r["highlight_ratio"] >= HIGHLIGHT_LIMIT * r[
+        "truth_highlight_ratio"]
+
+
 def posterior_rows(rows) -> list:
     """This tool's results that carry a posterior band (``posterior``)."""
     return [r for r in own_rows(rows) if "posterior" in r]
