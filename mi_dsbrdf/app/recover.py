@@ -173,10 +173,11 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
 def highlight_place(grid, lit, material, L, pairs, on_object, rerender, used) -> str:
     """Where on the object ``material``'s highlight lights, in words
     (:func:`brightest_place`): the used pixels its ``rerender`` brightens most over
-    the posterior's sample with the weakest highlight (of the samples
-    :meth:`~mi_dsbrdf.brdf.dsbrdf.Material.no_highlight_probability` draws), both
+    the posterior's sample with the weakest highlight (of
+    :meth:`~mi_dsbrdf.brdf.dsbrdf.Material.highlight_draws`, the doubt's), both
     scaled to the same sum."""
-    flattest = min(material.sample(128, seed=1), key=lambda m: m.highlight_ratio())
+    draws, ratios = material.highlight_draws()
+    flattest = draws[int(np.argmin(ratios))]
     other = grid_rerender(grid, lit, flattest, L, pairs, on_object)
     a, b = rerender.mean(axis=2), other.mean(axis=2)
     b = b * a[used].sum() / max(float(b[used].sum()), 1e-300)

@@ -272,11 +272,17 @@ class Material:
         values = np.stack([m.eval(theta_h, theta_d) for m in self.sample(n, seed)])
         return tuple(np.quantile(values, [(1 - level) / 2, (1 + level) / 2], axis=0))
 
-    def no_highlight_probability(self, below=NO_HIGHLIGHT, n=128, seed=1) -> float:
+    def highlight_draws(self, n=128, seed=1) -> tuple:
+        """(materials, ratios (n,)): the posterior samples a highlight is judged on
+        (:meth:`sample`) and their :meth:`highlight_ratio`. MaterialError for a
+        material without a covariance."""
+        draws = self.sample(n, seed)
+        return draws, np.array([m.highlight_ratio() for m in draws])
+
+    def no_highlight_probability(self, below=NO_HIGHLIGHT) -> float:
         """The posterior's probability that the material has no highlight: the share
-        of ``n`` posterior samples (:meth:`sample`) whose :meth:`highlight_ratio` is
-        below ``below``. MaterialError for a material without a covariance."""
-        return float(np.mean([m.highlight_ratio() < below for m in self.sample(n, seed)]))
+        of :meth:`highlight_draws` whose ratio is below ``below``."""
+        return float(np.mean(self.highlight_draws()[1] < below))
 
     def observed(self, theta_h, theta_d):
         """How much of the image's light-weighted pixel x light pairs saw each

@@ -87,15 +87,14 @@ from mi_dsbrdf.brdf.measured import MeasuredBRDF
 from mi_dsbrdf.evaluation.adam import adam_recover
 from mi_dsbrdf.config import NO_PRIORS, Config
 from mi_dsbrdf.evaluation.metrics import (CONVENTIONS, bsdf_values, direction_error_deg, highlight_ratio,
-                                          log_error_by_theta_d, mode_scores, posterior_scores,
-                                          log_rmse, log_rmse_scale_invariant, relight_psnr,
-                                          scale_invariant_log_error, split_errors)
+                                          log_error_by_theta_d, mode_scores, observed_samples, observed_split,
+                                          posterior_scores, log_rmse, log_rmse_scale_invariant, relight_psnr,
+                                          scale_invariant_log_error)
 from mi_dsbrdf.inference.envmap import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.images import read_image
 from mi_dsbrdf.inference.latlong import texel_blocks
 from mi_dsbrdf.inference.light import recover_light
-from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import usable_pixels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
@@ -274,7 +273,8 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         img = render(ts, point=POINT_DISTANCE * d_true)
         ts = texels({"type": "dsbrdf"}, res, shape=shape)
         keep = usable_pixels(ts.mask, img)
-        where = _observed(ts.with_point(POINT_DISTANCE * d_true), np.full((1, 3), POINT_INTENSITY), keep, samples)
+        where = observed_samples(ts.with_point(POINT_DISTANCE * d_true), np.full((1, 3), POINT_INTENSITY), keep,
+                                 samples)
         result = recover_light(ts, img, keep, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
         material, rows, laplace = result.material, result.log, result.laplace
@@ -296,7 +296,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
             img = shot_noise(img, ts.mask, case["photons"], seed=case["id"])
         keep = usable_pixels(ts.mask, img)          # the app's pixels: the silhouette ring dropped
         view = texels({"type": "dsbrdf"}, res, (H, W), shape=shape)     # what inference sees
-        where = _observed(view, downsample(truth, H, W), keep, samples)
+        where = observed_samples(view, downsample(truth, H, W), keep, samples)
         if method == "mean-constant":
             # doing nothing: the model's mean material (psi = 0) under a constant map
             out["seconds"] = 0.0
@@ -332,7 +332,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         if c == "paper":
             scale = s
             out["brdf_eq20_paper_by_theta_d"] = log_error_by_theta_d(values, samples.values, samples.theta_d, scale)
-    out.update(_observed_errors(values, samples, where))
+    out.update(observed_split(values, samples, where))
     if laplace is not None:
         out["highlight_doubt"], out["flags"] = result.highlight_doubt, result.flags
         # the posterior band at each temperature, the shipped ones among them
@@ -356,22 +356,6 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     return out
 
 
-def _observed(view, light, keep, samples) -> np.ndarray:
-    """(N,) bool: the ``samples`` whose (theta_h, theta_d) the ``keep`` pixels of
-    ``view`` look at under the true ``light`` (T, 3) (where the image shows the
-    material, :func:`~mi_dsbrdf.inference.lobes.observed_directions`)."""
-    rows = np.nonzero(np.asarray(keep).reshape(-1)[view.pixels])[0]
-    return observed_directions(view, light, rows)(samples.theta_h, samples.theta_d) > 0
-
-
-def _observed_errors(values, samples, where) -> dict:
-    """Eq. 20 (both conventions) of ``values`` on the observed samples (``where``)
-    and on the rest, and the observed share of the samples."""
-    return {"observed_fraction": float(where.mean()),
-            **{"brdf_eq20_%s_%s" % (part, c): e
-               for part, errors in split_errors(values, samples, where).items() for c, e in errors.items()}}
-
-
 def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None, where=None) -> dict:
     """The do-nothing baseline's measures on this case: the model's mean material
     (psi = 0) in Eq. 20 (both conventions; also on the ``where`` samples and the
@@ -382,7 +366,7 @@ def _do_nothing(case, model, samples, merl, data, truth_map=None, seen=None, whe
     out = {"brdf_eq20_" + c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
            for c in CONVENTIONS}
     if where is not None:
-        out.update(_observed_errors(values, samples, where))
+        out.update(observed_split(values, samples, where))
     out["highlight_ratio"] = highlight_ratio(values, samples.theta_h, samples.theta_d)
     out["relight"], out["relight_psnr"], _ = relight(case, mean, merl, data)
     if truth_map is not None:

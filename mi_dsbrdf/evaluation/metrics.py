@@ -19,7 +19,9 @@ use them; they are re-exported here beside the measures of a recovery:
 * :func:`band_scores` — whether a recovered material's posterior band holds the
   truth (its coverage) and how wide it is, where the image looked and elsewhere;
   :func:`map_coverage`, the same for a map's spread; :func:`posterior_scores`, both
-  at several temperatures; :func:`mode_scores`, the posterior's other mode.
+  at several temperatures; :func:`mode_scores`, the posterior's other mode;
+* :func:`observed_samples` — the samples an image looks at; :func:`observed_split`,
+  Eq. 20 on them and on the rest.
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ import numpy as np
 
 from mi_dsbrdf.brdf.angles import from_half_diff
 from mi_dsbrdf.brdf.dsbrdf import highlight_ratio  # noqa: F401 (one of this module's measures)
+from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.brdf.log_error import (CONVENTIONS, PAPER_FLOOR, log_brdf, log_rmse,  # noqa: F401 (re-exported)
                                       log_rmse_scale_invariant, material_errors, observed_errors,
                                       split_errors, values_errors)
@@ -184,3 +187,19 @@ def mode_scores(other, gap, values, samples) -> dict:
         out["distance_" + c] = log_rmse_scale_invariant(ov, values, samples.cos_i, c)[0]
         out["brdf_eq20_" + c] = log_rmse_scale_invariant(ov, samples.values, samples.cos_i, c)[0]
     return out
+
+
+def observed_samples(view, light, keep, samples) -> np.ndarray:
+    """(N,) bool: the ``samples`` whose (theta_h, theta_d) the ``keep`` pixels of
+    ``view`` look at under the true ``light`` (T, 3) (where the image shows the
+    material, :func:`~mi_dsbrdf.inference.lobes.observed_directions`)."""
+    rows = np.nonzero(np.asarray(keep).reshape(-1)[view.pixels])[0]
+    return observed_directions(view, light, rows)(samples.theta_h, samples.theta_d) > 0
+
+
+def observed_split(values, samples, where) -> dict:
+    """Eq. 20 (both conventions) of ``values`` on the observed samples (``where``)
+    and on the rest, and the observed share of the samples."""
+    return {"observed_fraction": float(where.mean()),
+            **{"brdf_eq20_%s_%s" % (part, c): e
+               for part, errors in split_errors(values, samples, where).items() for c, e in errors.items()}}

@@ -95,13 +95,11 @@ class Laplace:
                                      for wt, (d, _) in zip(weights, self.alternatives)], axis=1)
 
 
-def mode_weights(gaps, temperature=None) -> np.ndarray:
-    """The tempered posterior's weight of each other mode, exp(-gap / t) /
-    (1 + sum exp(-gap / t)), ``gaps`` their negative log posterior above the MAP's
-    (>= 0; t default :data:`POSTERIOR_TEMPERATURE`). The MAP's own weight is 1
-    less their sum."""
-    t = POSTERIOR_TEMPERATURE if temperature is None else float(temperature)
-    p = np.array([math.exp(-max(float(g), 0.0) / t) for g in gaps])
+def mode_weights(gaps, temperature) -> np.ndarray:
+    """The posterior's weight at ``temperature`` t of each other mode, exp(-gap / t)
+    / (1 + sum exp(-gap / t)), ``gaps`` their negative log posterior above the
+    MAP's (>= 0). The MAP's own weight is 1 less their sum."""
+    p = np.array([math.exp(-max(float(g), 0.0) / temperature) for g in gaps])
     return p / (1.0 + p.sum())
 
 
