@@ -272,7 +272,8 @@ def main(argv=None):
     excess = [r["mitsuba_vs_photo"] - r["rerender_vs_photo"] for r in rows]
     print("Mitsuba vs photo minus re-render vs photo: median %+.1f %%, worst %+.1f %% (target <= +1 %%)"
           % (100 * np.median(excess), 100 * max(excess)))
-    out = args.out or (os.path.join(OUT, "mitsuba_roundtrip", args.set, args.setting_name, "summary.json")
+    run = args.set + ("" if args.light == "envmap" else "-" + args.light)
+    out = args.out or (os.path.join(OUT, "mitsuba_roundtrip", run, args.setting_name, "summary.json")
                        if args.config else os.path.join(RESULTS, "mitsuba_roundtrip_%s%s.json" % (
                            args.set, "" if args.light == "envmap" else "_" + args.light)))
     os.makedirs(os.path.dirname(out), exist_ok=True)

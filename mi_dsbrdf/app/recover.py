@@ -106,7 +106,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     ts = TexelSum(working_scene(scene, grid), obj, cfg.map_size if needs.envmap_block else (1, 1),
                   visibility=needs.visibility, to_world=envmap_rotation(scene) if needs.envmap_block else None,
                   samples=cfg.texel_samples if needs.envmap_block else 1,     # the re-render as inference saw it
-                  highlights=cfg.highlight_texels if needs.envmap_block else 0)
+                  highlights=cfg.highlight_texels if needs.envmap_block else 0, pixel_rays=cfg.pixel_rays)
     keep = usable_blocks(grid, ts.mask, on_object, obs, user_mask, levels)
     if keep.sum() < MIN_PIXELS:
         raise InputError("only %d usable pixels (on the object, inside the mask, unsaturated, off the silhouette); "

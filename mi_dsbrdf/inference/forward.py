@@ -10,7 +10,12 @@ surface point x_p is
 shadow rays from x_p through the whole scene, so that the object shadows itself
 and every other shape shadows it; traced when the object is not convex or other
 shapes are in the scene, :mod:`~mi_dsbrdf.inference.scene_needs` decides).
-Under a point or a directional light V is traced towards the light instead.
+Under a point or a directional light V is traced towards the light instead,
+and each pixel is seen through ``pixel_rays`` x ``pixel_rays`` rays across its
+area, their mean its value (what a box pixel filter averages): the light's
+lanes are cheap (one per ray, not one per ray and texel), and at the
+terminator or on a lobe narrower than one pixel's reflected directions the
+centre ray alone is off by several per cent of Mitsuba's render.
 With ``samples`` s > 1 each texel is lit from s x s directions of its
 footprint, each with its share of the solid angle (the sum over t then runs
 over them, L_t shared): the map as a piecewise-constant function of direction,
@@ -32,6 +37,7 @@ With the reflectance fixed, the image is linear in L: I = T L, and
 from __future__ import annotations
 
 import copy
+import functools
 
 import drjit as dr
 import mitsuba as mi
@@ -40,7 +46,7 @@ import numpy as np
 from mi_dsbrdf.brdf.angles import pair_geometry
 from mi_dsbrdf.inference.highlights import TEXEL_SIDE, HighlightPairs
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_directions
-from mi_dsbrdf.inference.rays import centre_hits
+from mi_dsbrdf.inference.rays import FootprintRays, centre_hits
 
 #: Pixel-texel pairs evaluated per Dr.Jit launch (memory / speed trade-off).
 CHUNK = 1 << 22
@@ -59,9 +65,13 @@ class TexelSum:
     samples : directions per texel side (s x s per texel, module doc)
     highlights : how many texels nearest each pixel's mirror direction are integrated
         over the pixel's area and the texel (:mod:`~mi_dsbrdf.inference.highlights`; 0: none)
+    pixel_rays : rays per pixel side under a point or directional light
+        (:meth:`with_point`, :meth:`with_directions` of one direction; module doc);
+        1: the centre ray
     """
 
-    def __init__(self, scene, shape, map_size, visibility=False, to_world=None, samples=1, highlights=0):
+    def __init__(self, scene, shape, map_size, visibility=False, to_world=None, samples=1, highlights=0,
+                 pixel_rays=1):
         sensor = scene.sensors()[0]
         w, h = (int(v) for v in sensor.film().crop_size())
         self.image_size = (h, w)
@@ -75,6 +85,9 @@ class TexelSum:
         self.frames = tuple(np.array(v, dtype=np.float64) for v in (self.si.sh_frame.s, self.si.sh_frame.t,
                                                                     self.si.sh_frame.n, self.si.wi))
         self.positions = np.array(self.si.p, dtype=np.float64)
+        self.pixel_rays = int(pixel_rays)
+        if self.pixel_rays < 1:
+            raise ValueError("rays per pixel side must be >= 1, got %r" % (pixel_rays,))
         self.bsdf = shape.bsdf()
         self._scene, self._sensor, self._shape, self._trace = scene, sensor, shape, visibility
         self._to_world = None if to_world is None else np.asarray(to_world, dtype=np.float64)[:3, :3]
@@ -113,24 +126,53 @@ class TexelSum:
 
     def with_directions(self, directions, solid_angles) -> "TexelSum":
         """This view lit from the world directions (T, 3) with solid angles (T,)
-        instead of the map's texels: one direction with solid angle 1 makes the
-        sum a directional light whose 'radiance' is its irradiance."""
+        instead of the map's texels. One direction with solid angle 1 makes the
+        sum a directional light whose 'radiance' is its irradiance, seen over each
+        pixel's footprint (module doc)."""
+        directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        solid_angles = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
+        if directions.shape[0] == 1:
+            self.footprint_rays          # traced once, shared by every light of this view
         out = copy.copy(self)
-        out._light(np.asarray(directions, dtype=np.float64).reshape(-1, 3),
-                   np.asarray(solid_angles, dtype=np.float64).reshape(-1), None)
+        if directions.shape[0] == 1:
+            rays = out.footprint_rays
+            out._light(np.repeat(directions, rays.share.size, axis=0), solid_angles[0] * rays.share, None,
+                       per_texel=rays.side ** 2, ray_lanes=True)
+        else:
+            out._light(directions, solid_angles, None)
         return out
 
     def with_point(self, position) -> "TexelSum":
         """This view lit from a point at ``position`` (world): one 'texel' whose
-        direction and solid angle 1/r^2 differ per pixel, so that its 'radiance'
-        is the point light's intensity (W/sr, Mitsuba's ``point`` emitter)."""
+        direction and solid angle 1/r^2 differ per ray of each pixel's footprint
+        (module doc), so that its 'radiance' is the point light's intensity (W/sr,
+        Mitsuba's ``point`` emitter)."""
         p = np.asarray(position, dtype=np.float64).reshape(3)
-        x = self.positions.T
-        d = p - x
-        r2 = np.maximum((d * d).sum(axis=1), 1e-12)
+        rays = self.footprint_rays       # traced once, shared by every light of this view
         out = copy.copy(self)
-        out._light(d / np.sqrt(r2)[:, None], 1.0 / r2, p)      # (P, 3), (P,): per pixel
+        d = p - rays.positions.T
+        r2 = np.maximum((d * d).sum(axis=1), 1e-12)
+        out._light(d / np.sqrt(r2)[:, None], rays.share / r2, p,           # per ray
+                   per_texel=rays.side ** 2, ray_lanes=True)
         return out
+
+    def with_pixel_rays(self, pixel_rays) -> "TexelSum":
+        """This view, not yet under a point or directional light, with ``pixel_rays``
+        x ``pixel_rays`` rays a pixel under one."""
+        if self.ray_lanes:
+            raise ValueError("with_pixel_rays: this view is lit already; change the rays before the light")
+        out = copy.copy(self)
+        out.__dict__.pop("footprint_rays", None)
+        out.pixel_rays = int(pixel_rays)
+        if out.pixel_rays < 1:
+            raise ValueError("rays per pixel side must be >= 1, got %r" % (pixel_rays,))
+        return out
+
+    @functools.cached_property
+    def footprint_rays(self) -> FootprintRays:
+        """The ``pixel_rays`` x ``pixel_rays`` rays across each pixel that a point or
+        directional light's lanes see (traced on first use: a map never needs them)."""
+        return FootprintRays.trace(self._scene, self._sensor, self._shape, self.pixels, self.si, self.pixel_rays)
 
     def with_bsdf(self, bsdf) -> "TexelSum":
         """This view with the object's BSDF replaced by ``bsdf`` (a mi.BSDF)."""
@@ -138,9 +180,12 @@ class TexelSum:
         out.bsdf = bsdf
         return out
 
-    def _light(self, directions, solid_angles, position, per_texel=1):
+    def _light(self, directions, solid_angles, position, per_texel=1, ray_lanes=False):
         self.directions, self.solid_angles, self.light_position = directions, solid_angles, position
         self.per_texel = per_texel          # consecutive directions that share one texel's radiance
+        # a light's lanes are the rays of footprint_rays, each with its own direction
+        # and solid angle (times the ray's share of its pixel); a map's are pixel x direction
+        self.ray_lanes = ray_lanes
         self.highlights = None              # a map's (_map) or none
         self.visibility = self._trace_visibility(self._scene) if self._trace else None
 
@@ -155,8 +200,11 @@ class TexelSum:
         sub.frames = tuple(f[:, rows] for f in self.frames)
         sub.positions = self.positions[:, rows]
         sub.visibility = None if self.visibility is None else self.visibility[rows]
-        if self.light_position is not None:
-            sub.directions, sub.solid_angles = self.directions[rows], self.solid_angles[rows]
+        if "footprint_rays" in self.__dict__:              # traced already: the pixels' own
+            sub.footprint_rays = self.footprint_rays.subset(rows)
+        if self.ray_lanes:
+            lanes = (rows[:, None] * self.per_texel + np.arange(self.per_texel)).reshape(-1)
+            sub.directions, sub.solid_angles = self.directions[lanes], self.solid_angles[lanes]
         if self.highlights is not None:
             sub.highlights = self.highlights.subset(rows)
         return sub
@@ -171,8 +219,9 @@ class TexelSum:
 
     @property
     def n_directions(self) -> int:
-        """Light directions per pixel (pixel-direction pairs per pixel): texels x samples."""
-        return 1 if self.light_position is not None else self.directions.shape[0]
+        """Light directions per pixel (pixel-direction pairs per pixel): texels x samples,
+        or a light's rays a pixel."""
+        return self.per_texel if self.ray_lanes else self.directions.shape[0]
 
     def texel_sums(self, pairs, rows) -> np.ndarray:
         """(rows, texels) float32: sums over each texel's directions of ``pairs``, a
@@ -184,15 +233,21 @@ class TexelSum:
         return pairs.numpy().reshape(rows, -1)
 
     def _pairs(self, t0, t1):
-        """Lanes for texels [t0, t1) x all pixels (pixel-major): (si, wo_local, pixel, texel)."""
+        """Lanes for directions [t0, t1) x all pixels (pixel-major): (si, wo_local,
+        pixel, direction, the lane's index into ``directions`` and ``solid_angles``)."""
         P, nt = self.n_pixels, t1 - t0
         lane = dr.arange(mi.UInt32, P * nt)
         pix = lane // nt
         tex = lane - pix * nt + t0
-        si = dr.gather(mi.SurfaceInteraction3f, self.si, pix)
+        if self.ray_lanes:
+            light = pix * self.n_directions + tex          # the ray's index
+            si = dr.gather(mi.SurfaceInteraction3f, self.footprint_rays.si, light)
+        else:
+            light = tex
+            si = dr.gather(mi.SurfaceInteraction3f, self.si, pix)
         d = mi.Vector3f(*(mi.Float(self.directions[:, k].astype(np.float32)) for k in range(3)))
-        wo = si.to_local(dr.gather(mi.Vector3f, d, pix if self.light_position is not None else tex))
-        return si, wo, pix, tex
+        wo = si.to_local(dr.gather(mi.Vector3f, d, light))
+        return si, wo, pix, tex, light
 
     def _chunks(self):
         """Direction ranges [t0, t1), whole texels each."""
@@ -209,27 +264,34 @@ class TexelSum:
         P, nd = self.n_pixels, self.n_directions
         point = self.light_position is not None
         n_light = self.directions.shape[0]
+        # the surface points: a light's rays (one per lane), or the pixels' centre hits
+        if self.ray_lanes:
+            rays = self.footprint_rays
+            positions, n, frames, width = rays.positions, rays.normals, rays.frames, P * nd
+        else:       # the geometric normal offsets the rays
+            positions, n, frames, width = self.positions, np.array(self.si.n, dtype=np.float64), self.frames, P
         # All inputs in one array, gathered (no literals, one fresh array): a new
         # light then runs the same kernel, not a new one (a light search traces
         # hundreds of point lights)
-        n = np.array(self.si.n, dtype=np.float64)          # the geometric normal offsets the rays
         target = np.zeros(3) if self.light_position is None else self.light_position
-        buf = mi.Float(np.concatenate([self.positions.reshape(-1), n.reshape(-1), *(f.reshape(-1) for f in self.frames),
+        buf = mi.Float(np.concatenate([positions.reshape(-1), n.reshape(-1), *(f.reshape(-1) for f in frames),
                                        self.directions.T.reshape(-1), target]).astype(np.float32))
-        light0 = 18 * P
+        light0 = 18 * width
         vis = np.ones((P, nd), dtype=bool)
         for t0, t1 in self._chunks():
             nt = t1 - t0
             lane = dr.arange(mi.UInt32, P * nt)
             pix = lane // nt
-            per_light = pix if point else lane - pix * nt + dr.opaque(mi.UInt32, t0)
+            tex = lane - pix * nt + dr.opaque(mi.UInt32, t0)
+            geo = pix * nd + tex if self.ray_lanes else pix          # the lane's surface point
+            per_light = geo if self.ray_lanes else tex
 
             def vec(first, index, width):
                 return mi.Vector3f(*(dr.gather(mi.Float, buf, index + (first + k) * width) for k in range(3)))
             si = dr.zeros(mi.SurfaceInteraction3f, P * nt)
-            si.p, si.n = mi.Point3f(vec(0, pix, P)), mi.Normal3f(vec(3, pix, P))
-            frame = mi.Frame3f(vec(6, pix, P), vec(9, pix, P), vec(12, pix, P))
-            wi_z = dr.gather(mi.Float, buf, pix + 17 * P)
+            si.p, si.n = mi.Point3f(vec(0, geo, width)), mi.Normal3f(vec(3, geo, width))
+            frame = mi.Frame3f(vec(6, geo, width), vec(9, geo, width), vec(12, geo, width))
+            wi_z = dr.gather(mi.Float, buf, geo + 17 * width)
             wo = frame.to_local(vec(0, per_light + light0, n_light))
             if point:
                 ray = si.spawn_ray_to(mi.Point3f(vec(0, dr.zeros(mi.UInt32, P * nt) + light0 + 3 * n_light, 1)))
@@ -239,12 +301,12 @@ class TexelSum:
             vis[:, t0:t1] = ~blocked.numpy().reshape(P, nt)
         return vis
 
-    def _weights(self, si, wo, pix, tex, t0, t1):
-        """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f."""
+    def _weights(self, si, wo, light, t0, t1):
+        """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f
+        (``light``: the lanes' indices into ``solid_angles``, of :meth:`_pairs`)."""
         ctx = mi.BSDFContext()
         f = self.bsdf.eval(ctx, si, wo)
-        omega = dr.gather(mi.Float, mi.Float(self.solid_angles.astype(np.float32)),
-                          tex if self.light_position is None else pix)
+        omega = dr.gather(mi.Float, mi.Float(self.solid_angles.astype(np.float32)), light)
         f = f * omega
         if self.visibility is not None:
             v = mi.Bool(self.visibility[:, t0:t1].reshape(-1))
@@ -262,8 +324,8 @@ class TexelSum:
         k = self.per_texel
         with dr.suspend_grad():
             for t0, t1 in self._chunks():
-                si, wo, pix, tex = self._pairs(t0, t1)
-                f = self._weights(si, wo, pix, tex, t0, t1)
+                si, wo, _, _, light = self._pairs(t0, t1)
+                f = self._weights(si, wo, light, t0, t1)
                 for c in range(3):
                     out[c, :, t0 // k:t1 // k] = self.texel_sums(f[c], self.n_pixels)
             if self.highlights is not None:
@@ -277,21 +339,27 @@ class TexelSum:
         weight cos theta_o * solid angle (* visibility), zero unless the camera and
         the texel are both above the surface (the plugins' ``both_above``).
         :class:`~mi_dsbrdf.inference.lobes.LobeSum` evaluates the DSBRDF on them."""
-        # All inputs in one array: with several fresh input arrays Dr.Jit's kernel
-        # hash depends on their allocation order, and every call compiled anew.
         P, nt = self.n_pixels, self.n_directions
         n_light = self.directions.shape[0]
-        buf = mi.Float(np.concatenate([np.concatenate(self.frames).reshape(-1), self.directions.T.reshape(-1),
-                                       self.solid_angles.reshape(-1)]).astype(np.float32))
         lane = dr.arange(mi.UInt32, P * nt)
         pix = lane // nt
-        per_light = pix if self.light_position is not None else lane - pix * nt
-
-        def rows(first, count, index, width):
-            return [dr.gather(mi.Float, buf, index + (first + k) * width) for k in range(count)]
-        s_, t_, n_, wi = (rows(3 * i, 3, pix, P) for i in range(4))
-        d = [dr.gather(mi.Float, buf, per_light + 12 * P + k * n_light) for k in range(3)]
-        omega = dr.gather(mi.Float, buf, per_light + 12 * P + 3 * n_light)
+        light = np.concatenate([self.directions.T.reshape(-1), self.solid_angles.reshape(-1)]).astype(np.float32)
+        if self.ray_lanes:
+            # a light's rays (one per lane): their frames are the view's, kept in one
+            # Dr.Jit array (FootprintRays.frame_buffer), and the light is one fresh array
+            frames, buf = self.footprint_rays.frame_buffer, mi.Float(light)
+            geo, per_light, stride, first = lane, lane, P * nt, 0
+        else:
+            # All inputs in one array: with several fresh input arrays Dr.Jit's kernel
+            # hash depends on their allocation order, and every call compiled anew.
+            frames = buf = mi.Float(np.concatenate([np.concatenate(self.frames).reshape(-1).astype(np.float32),
+                                                    light]))
+            geo, per_light, stride, first = pix, lane - pix * nt, P, 12 * P
+        # frames: 12 rows of ``stride`` values; the light's from ``first`` in buf
+        s_, t_, n_, wi = ([dr.gather(mi.Float, frames, geo + (3 * i + k) * stride) for k in range(3)]
+                          for i in range(4))
+        d = [dr.gather(mi.Float, buf, per_light + first + k * n_light) for k in range(3)]
+        omega = dr.gather(mi.Float, buf, per_light + first + 3 * n_light)
         log_cos, theta_d, weight = pair_geometry((s_, t_, n_), wi, d, omega)
         if self.visibility is not None:
             weight = dr.select(mi.Bool(self.visibility.reshape(-1)), weight, 0.0)
@@ -311,8 +379,8 @@ class TexelSum:
         L = np.asarray(illumination, dtype=np.float32).reshape(-1, 3)
         Lt = mi.Color3f(*(mi.Float(L[:, c]) for c in range(3)))
         for t0, t1 in self._chunks():
-            si, wo, pix, tex = self._pairs(t0, t1)
-            f = self._weights(si, wo, pix, tex, t0, t1) * dr.gather(mi.Color3f, Lt, tex // self.per_texel)
+            si, wo, _, tex, light = self._pairs(t0, t1)
+            f = self._weights(si, wo, light, t0, t1) * dr.gather(mi.Color3f, Lt, tex // self.per_texel)
             yield dr.block_sum(f, t1 - t0)                   # (P,) radiance from these texels
         if self.highlights is not None:
             h = self.highlights

@@ -129,6 +129,12 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     # split the image's colour between material and light are a map's
     post = Posterior(texels, observed, mask, model, cfg.with_colour_split(False), point=point,
                      gmm_volume=LIGHT_GMM_VOLUME)
+    # the search and the first light block see each pixel through its centre ray (most
+    # of the light's evaluations; the light block's rounds then refine it over the
+    # pixels' footprints, TexelSum.pixel_rays)
+    search = post if texels.pixel_rays == 1 else Posterior(
+        texels.with_pixel_rays(1), observed, mask, model, cfg.with_colour_split(False), point=point,
+        gmm_volume=LIGHT_GMM_VOLUME)
     logits = image_chroma_logits(post.observed, post.keep, post.R)
     psi = np.zeros(post.k)
     t0 = time.perf_counter()
@@ -140,23 +146,23 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
             progress(rows[-1])
 
     if known_light is None:
-        mean_material = post.material(psi, logits)
+        mean_material = search.material(psi, logits)
         best = None
-        cands = [c[1:] for c in candidate_lights(post, mean_material)]
-        for th, ph in highlight_lights(post):
-            li = matched_log_intensity(post, mean_material, th, ph)
+        cands = [c[1:] for c in candidate_lights(search, mean_material)]
+        for th, ph in highlight_lights(search):
+            li = matched_log_intensity(search, mean_material, th, ph)
             if li is not None:
                 cands.append((th, ph, li))
         for th, ph, li in cands:
-            post.aim(th, ph)
-            step = reflectance_block(post, psi, logits, np.full((1, 3), np.exp(li)),
+            search.aim(th, ph)
+            step = reflectance_block(search, psi, logits, np.full((1, 3), np.exp(li)),
                                      max(int(cfg.block_iters * SEARCH_FRACTION), 5), fit_scale=True,
                                      fit_chroma=colour)
             li = float(np.log(step.L[0, 0]))
-            th, ph, li = light_block(post, post.material(step.psi, step.logits), th, ph, li,
+            th, ph, li = light_block(search, search.material(step.psi, step.logits), th, ph, li,
                                      maxfev=SEARCH_POWELL_EVALS)                     # coarse: refined later
-            post.aim(th, ph)
-            value = post.reflectance_terms(step.psi, step.logits, np.full((1, 3), np.exp(li)))[0]
+            search.aim(th, ph)
+            value = search.reflectance_terms(step.psi, step.logits, np.full((1, 3), np.exp(li)))[0]
             log({"pass": "light search", "round": len(rows), "neg_log_posterior": value})
             if best is None or value < best[0]:
                 best = (value, step.psi, step.logits, th, ph, li)
@@ -169,7 +175,7 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         if known_light is None and rnd == 0:
             # Powell on the light; from the second round on, the reflectance block
             # refines the direction and the scale jointly with the material
-            theta, phi, log_i = light_block(post, post.material(psi, logits), theta, phi, log_i)
+            theta, phi, log_i = light_block(search, search.material(psi, logits), theta, phi, log_i)
         L = np.full((1, 3), np.exp(log_i))
         post.aim(theta, phi)
         if rnd == 0:

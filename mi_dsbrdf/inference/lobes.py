@@ -141,17 +141,25 @@ class LobeSum:
         return scalars(0, N_CONTROL), scalars(R * N_CONTROL, N_CONTROL), scalars(2 * R * N_CONTROL, 3)
 
     def _highlight_sums(self, terms, n_terms, chunk):
-        """Yield pixel ranges [p0, p1) of at most ``chunk`` highlight pairs and, for
-        each of their pairs, the sums over its lanes of ``terms(lc, td, w)`` (a list
-        of ``n_terms`` Dr.Jit Floats), as (n_terms, p1 - p0, K) float32. The lanes
-        are summed in a Dr.Jit loop: none is stored (a stored lane of 39 Jacobian
-        columns made the pairs 8 times the cost of the texel sum's)."""
+        """:meth:`_lane_sums` over the highlight pairs' lanes (K pairs a pixel)."""
         h = self.texels.highlights
-        if h is None:
-            return
-        K, m = h.texels.shape[1], h.per_pair
-        geometry = self.highlight_geometry
-        for p0, p1 in pixel_ranges(self.n_pixels, K, chunk):
+        if h is not None:
+            yield from self._lane_sums(self.highlight_geometry, h.texels.shape[1], h.per_pair, terms, n_terms, chunk)
+
+    def _ray_sums(self, terms, n_terms, chunk):
+        """:meth:`_lane_sums` over a light's rays (``texels.ray_lanes``), one sum a pixel."""
+        yield from self._lane_sums(self.geometry, 1, self.texels.per_texel, terms, n_terms, chunk)
+
+    @staticmethod
+    def _lane_sums(geometry, K, m, terms, n_terms, chunk):
+        """Yield pixel ranges [p0, p1) of at most ``chunk`` pairs (K a pixel, each of
+        ``m`` consecutive lanes of ``geometry``) and each pair's sum over its lanes of
+        ``terms(lc, td, w)`` (a list of ``n_terms`` Dr.Jit Floats), as (n_terms,
+        p1 - p0, K) float32. The lanes are summed in a Dr.Jit loop: none is stored (a
+        stored lane of 39 Jacobian columns made the highlight pairs 8 times the cost
+        of the texel sum's, and a light's rays summed after evaluation 1.5 times)."""
+        n_pixels = dr.width(geometry[0]) // (K * m)
+        for p0, p1 in pixel_ranges(n_pixels, K, chunk):
             first = dr.arange(mi.UInt32, p0 * K, p1 * K) * m         # each pair's first lane
 
             def body(j, *acc):
@@ -166,15 +174,20 @@ class LobeSum:
     def _channels(self, material, out):
         """Fill ``out`` (3, P, T) with weight * Eq. 4 per colour channel."""
         lk, lg, ch = self._scalars(material)
-        for p0, p1, directions in self._rows(VALUE_CHUNK):
-            rgb = 0.0
-            for lc, td, w in directions:
-                rgb = rgb + mi.Color3f(*(w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)))
-            dr.eval(rgb)
-            for c in range(3):
-                out[c, p0:p1] = rgb[c].numpy().reshape(p1 - p0, self.n_texels)
+
         def rgb(lc, td, w):
             return [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
+        if self.texels.ray_lanes:
+            for p0, p1, sums in self._ray_sums(rgb, 3, VALUE_CHUNK):
+                out[:, p0:p1] = sums
+            return out
+        for p0, p1, directions in self._rows(VALUE_CHUNK):
+            total = 0.0
+            for lc, td, w in directions:
+                total = total + mi.Color3f(*rgb(lc, td, w))
+            dr.eval(total)
+            for c in range(3):
+                out[c, p0:p1] = total[c].numpy().reshape(p1 - p0, self.n_texels)
         for p0, p1, sums in self._highlight_sums(rgb, 3, VALUE_CHUNK):
             self.texels.highlights.add_to(out, sums, p0)
         return out
@@ -188,6 +201,22 @@ class LobeSum:
         """(P, 3) float64 radiance under ``illumination`` (T, 3)."""
         return apply_transport(self.transport(material), illumination)
 
+    def _column_sums(self, terms, n_terms):
+        """Yield pixel ranges [p0, p1) and the sums of ``terms(lc, td, w)`` (``n_terms``
+        Dr.Jit Floats) over each pixel-texel pair's directions, (n_terms, p1 - p0, T)
+        float32: a light's rays in a Dr.Jit loop (:meth:`_ray_sums`), a map texel's
+        directions in registers (:meth:`_rows`)."""
+        if self.texels.ray_lanes:
+            yield from self._ray_sums(terms, n_terms, JACOBIAN_CHUNK)
+            return
+        for p0, p1, directions in self._rows(JACOBIAN_CHUNK):
+            cols = None
+            for lc, td, w in directions:            # a texel's directions, summed in the kernel
+                values = terms(lc, td, w)
+                cols = values if cols is None else [a + b for a, b in zip(cols, values)]
+            dr.eval(*cols)
+            yield p0, p1, np.stack([c.numpy().reshape(p1 - p0, self.n_texels) for c in cols])
+
     def jacobian(self, material, illumination) -> LobeJacobian:
         """Radiance under ``illumination`` (T, 3) and its exact derivatives by every
         control value and chromaticity of ``material`` (see the module doc)."""
@@ -195,21 +224,18 @@ class LobeSum:
         R = material.n_lobes
         L, s = unit_scaled(illumination)
         sums = np.empty((R, 1 + 2 * N_CONTROL, 3, self.n_pixels))
-        for p0, p1, directions in self._rows(JACOBIAN_CHUNK):
-            cols = None
-            for lc, td, w in directions:            # a texel's directions, summed in the kernel
-                terms = _jacobian_terms(lc, td, w, lk, lg, material.knots)
-                cols = terms if cols is None else [a + b for a, b in zip(cols, terms)]
-            dr.eval(*cols)
-            A = [c.numpy().reshape(p1 - p0, self.n_texels) for c in cols]
+
+        def terms(lc, td, w):
+            return _jacobian_terms(lc, td, w, lk, lg, material.knots)
+        n_cols = R * (1 + 2 * N_CONTROL)
+        for p0, p1, A in self._column_sums(terms, n_cols):          # A: (columns, pixels, texels)
             if self.n_texels == 1:                  # one light: the sum over texels is a product
-                flat = L[0][None, :, None] * np.stack(A)[:, None, :, 0]
+                flat = L[0][None, :, None] * A[:, None, :, 0]
             else:
                 flat = np.stack([(a @ L).T for a in A])
             sums[..., p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         h = self.texels.highlights
-        for p0, p1, A in self._highlight_sums(lambda lc, td, w: _jacobian_terms(lc, td, w, lk, lg, material.knots),
-                                              R * (1 + 2 * N_CONTROL), JACOBIAN_CHUNK):
+        for p0, p1, A in self._highlight_sums(terms, R * (1 + 2 * N_CONTROL), JACOBIAN_CHUNK):
             flat = np.einsum("npk,pkc->ncp", A, L[h.texels[p0:p1]])          # A: (columns, pixels, K)
             sums[..., p0:p1] += flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         sums *= s

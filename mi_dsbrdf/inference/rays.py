@@ -2,6 +2,9 @@
 points over each pixel's area (what a box pixel filter averages)."""
 from __future__ import annotations
 
+import dataclasses
+import functools
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -31,3 +34,55 @@ def sample_hits(scene, sensor, shape, pixels, side) -> tuple:
     hit = np.array(si.is_valid()) & (np.array(dr.reinterpret_array(mi.UInt32, si.shape)) ==
                                      np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))
     return si, hit
+
+
+@dataclasses.dataclass(frozen=True)
+class FootprintRays:
+    """``side`` x ``side`` camera rays across the area of each of P pixels
+    (:func:`sample_hits`), pixel-major, a pixel's rays row by row: the lanes of a
+    point or directional light's texel sum over pixel footprints
+    (:class:`~mi_dsbrdf.inference.forward.TexelSum`). A ray that misses the object
+    carries its pixel's centre hit, with share 0 (what it sees is not the object's).
+
+    side : rays per pixel side
+    si : SurfaceInteraction3f of the P * side^2 rays
+    frames : (s, t, n, wi), (3, P * side^2) float64 each: the shading frame and the
+        direction to the camera in it
+    positions, normals : (3, P * side^2) float64: surface points and geometric normals
+    share : (P * side^2,) float64: 1 / side^2 for a ray that sees the object, else 0
+    """
+    side: int
+    si: object
+    frames: tuple
+    positions: np.ndarray
+    normals: np.ndarray
+    share: np.ndarray
+
+    @classmethod
+    def trace(cls, scene, sensor, shape, pixels, centre_si, side) -> "FootprintRays":
+        """The rays of the film pixels ``pixels`` (flat indices), whose centre rays'
+        SurfaceInteraction is ``centre_si`` (side 1: those, traced again by none)."""
+        side = int(side)
+        if side == 1:
+            si, hit = centre_si, np.ones(len(pixels), bool)
+        else:
+            si, hit = sample_hits(scene, sensor, shape, pixels, side)
+            own = dr.arange(mi.UInt32, dr.width(si)) // (side * side)
+            si = dr.select(mi.Bool(hit), si, dr.gather(mi.SurfaceInteraction3f, centre_si, own))
+        frames = tuple(np.array(v, dtype=np.float64) for v in (si.sh_frame.s, si.sh_frame.t, si.sh_frame.n, si.wi))
+        return cls(side, si, frames, np.array(si.p, dtype=np.float64), np.array(si.n, dtype=np.float64),
+                   np.where(hit, 1.0 / side ** 2, 0.0))
+
+    @functools.cached_property
+    def frame_buffer(self):
+        """The frames as one float32 Dr.Jit array, (s, t, n, wi) x (x, y, z) rows of
+        P * side^2 values: uploaded once for every light of the view."""
+        return mi.Float(np.concatenate(self.frames).reshape(-1).astype(np.float32))
+
+    def subset(self, rows) -> "FootprintRays":
+        """The rays of the pixels ``rows`` (indices into this object's P)."""
+        n = self.side ** 2
+        rays = (np.asarray(rows, dtype=np.int64)[:, None] * n + np.arange(n)).reshape(-1)
+        return FootprintRays(self.side, dr.gather(mi.SurfaceInteraction3f, self.si, mi.UInt32(rays.astype(np.uint32))),
+                             tuple(f[:, rays] for f in self.frames), self.positions[:, rays], self.normals[:, rays],
+                             self.share[rays])
