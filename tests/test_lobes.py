@@ -71,6 +71,39 @@ def test_jacobian_matches_forward_mode_ad():
     assert np.abs(off_diagonal).max() == 0
 
 
+@pytest.mark.parametrize("light", ["point", "directional"])
+def test_pixel_rays_match_the_plugin(light):
+    """3 x 3 rays a pixel under a point or a directional light: the fast path's
+    values and Jacobian against the plugin's, on all pixels and on a subset."""
+    model = model_data.shipped_model()
+    psi = np.linspace(-0.4, 0.4, model.basis.n_bases)
+    chroma = np.array([[0.5, 0.3, 0.2], [0.2, 0.3, 0.5], [0.3, 0.4, 0.3]])
+    props = {"type": "dsbrdf", "psi": " ".join(map(str, psi))}
+    props.update({"chromaticity_%d" % r: " ".join(map(str, chroma[r])) for r in range(3)})
+    base = texels(props, 16, pixel_rays=3)
+    ts = base.with_point([1.5, 2.0, 3.0]) if light == "point" else base.with_directions([[0.6, 0.3, 0.74]], [1.0])
+    assert ts.n_directions == 9 and ts.n_texels == 1 and ts.footprint_rays.share.size == 9 * ts.n_pixels
+    material = Material.from_basis(model.basis, psi, chroma)
+    L = np.full((1, 3), 7.0)
+    fast = LobeSum(ts)
+    ref = ts.render(L)
+    assert ref.max() > 0 and relative(fast.render(material, L), ref) < 1e-5
+    rows = np.arange(0, ts.n_pixels, 5)
+    assert relative(fast.subset(rows).render(material, L), ref[rows]) < 1e-5
+    params = mi.traverse(ts.bsdf)
+    dr.enable_grad(params["psi"])
+    params.update()
+    image, J = ts.reflectance_jacobian(L, params, ["psi"])
+    jac = fast.jacobian(material, L)
+    assert relative(jac.image, image) < 1e-5
+    assert relative(psi_jacobian(model.basis, psi, jac.controls).transpose(2, 1, 0), J) < 1e-4
+    # the centre ray alone is another image (the rays are not a copy of it)
+    centre = texels(props, 16)
+    centre = centre.with_point([1.5, 2.0, 3.0]) if light == "point" else centre.with_directions([[0.6, 0.3, 0.74]],
+                                                                                               [1.0])
+    assert relative(centre.render(L), ref) > 1e-3
+
+
 def test_jacobian_stays_finite_for_the_sharpest_lobe_under_a_sun():
     """kappa at its bound (e^{60} at the peak) under a 1e5 sun: float32 products
     would overflow without the scaling of the light and the order of the factors."""

@@ -71,7 +71,8 @@ every method alike) and scores it:
 * ``terms``: the last logged round's negative log posterior term by term
   (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
-  ``seconds``, and ``finite`` (no NaN/Inf anywhere in the result).
+  ``seconds`` (point cases: the recovery's; probes: with the truth's render), and ``finite``
+  (no NaN/Inf anywhere in the result).
 """
 from __future__ import annotations
 
@@ -282,6 +283,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
         keep = usable_pixels(ts.mask, img)
         where = observed_samples(ts.with_point(POINT_DISTANCE * d_true), np.full((1, 3), POINT_INTENSITY), keep,
                                  samples)
+        t0 = time.perf_counter()                    # the recovery alone (its photograph is 8 x 8 rays a pixel)
         result = recover_light(ts, img, keep, model, cfg, point=(np.zeros(3), POINT_DISTANCE))
         out["seconds"] = time.perf_counter() - t0
         material, rows, laplace = result.material, result.log, result.laplace
