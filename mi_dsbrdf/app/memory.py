@@ -49,6 +49,10 @@ TRANSPORT_BYTES = 24.0
 #: bytes per light direction of a view (directions and solid angles in float64 and
 #: float32, and the copies made on the way)
 DIRECTION_BYTES = 120.0
+#: bytes per ray of a point or directional light's view (Config.pixel_rays^2 a pixel):
+#: its SurfaceInteraction, frames and points in float64 and float32, direction and
+#: solid angle, in the view and its reflectance subset
+RAY_BYTES = 400.0
 #: bytes per pixel of the film: the image as read and in float64, the re-render, the
 #: masks, the block sums and the previews
 IMAGE_PIXEL_BYTES = 150.0
@@ -88,8 +92,10 @@ def memory_estimate(cfg: Config, grid: WorkingGrid, envmap=True, visibility=Fals
         refl = min(post, int(np.clip(cfg.reflectance_pairs // T, MIN_REFLECTANCE_PIXELS, MAX_REFLECTANCE_PIXELS)))
         views += PAIR_BYTES * (post + refl) * cfg.highlight_texels * (PIXEL_SIDE * TEXEL_SIDE) ** 2
     else:
-        views = (PAIR_BYTES + TRANSPORT_BYTES) * pixels + JACOBIAN_BYTES * min(pixels, MAX_REFLECTANCE_PIXELS)
-        vis = 2 * pixels if visibility else 0
+        rays = pixels * cfg.pixel_rays ** 2         # a light's lanes: the rays across each pixel
+        views = ((PAIR_BYTES + RAY_BYTES) * rays + TRANSPORT_BYTES * pixels
+                 + JACOBIAN_BYTES * min(pixels, MAX_REFLECTANCE_PIXELS))
+        vis = 2 * rays if visibility else 0
     H, W = grid.image
     parts = {"views": views, "visibility": float(vis), "directions": directions,
              "image": IMAGE_PIXEL_BYTES * H * W, "base": BASE_BYTES}

@@ -129,9 +129,9 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     # split the image's colour between material and light are a map's
     post = Posterior(texels, observed, mask, model, cfg.with_colour_split(False), point=point,
                      gmm_volume=LIGHT_GMM_VOLUME)
-    # the search and the first light block see each pixel through its centre ray (most
-    # of the light's evaluations; the light block's rounds then refine it over the
-    # pixels' footprints, TexelSum.pixel_rays)
+    # the search and the first round see each pixel through its centre ray (most of
+    # the evaluations); the later rounds refine material and light over the pixels'
+    # footprints (TexelSum.pixel_rays)
     search = post if texels.pixel_rays == 1 else Posterior(
         texels.with_pixel_rays(1), observed, mask, model, cfg.with_colour_split(False), point=point,
         gmm_volume=LIGHT_GMM_VOLUME)
@@ -179,10 +179,12 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
         L = np.full((1, 3), np.exp(log_i))
         post.aim(theta, phi)
         if rnd == 0:
-            # the reflectance block from every start (psi found so far, the mean, GMM means)
-            steps = [reflectance_block(post, p0, logits, L, cfg.block_iters, fit_scale=known_light is None,
+            # the reflectance block from every start (psi found so far, the mean, GMM
+            # means), on the search's centre rays like the light block before it
+            search.aim(theta, phi)
+            steps = [reflectance_block(search, p0, logits, L, cfg.block_iters, fit_scale=known_light is None,
                                        fit_chroma=colour) for p0 in [psi] + reflectance_starts(model)]
-            step = min(steps, key=lambda s: post.reflectance_terms(s.psi, s.logits, s.L)[0])
+            step = min(steps, key=lambda s: search.reflectance_terms(s.psi, s.logits, s.L)[0])
         elif known_light is None:
             step = reflectance_block(post, psi, logits, L, cfg.block_iters, fit_scale=True, direction=(theta, phi),
                                      fit_chroma=colour)
