@@ -125,15 +125,17 @@ def highlight_ratio(values, theta_h, theta_d) -> float:
     """How much of a highlight a BRDF has: the median over samples near the
     half-vector peak (theta_h < 5 deg) over the median at theta_h 40-50 deg,
     both at theta_d < 30 deg, mean over channels. About 1 for a Lambertian
-    surface; a glossy one is far above. ``values`` (N, 3) in 1/sr at the angles
-    ``theta_h``, ``theta_d`` (N,) (radians), e.g. MERL samples."""
+    surface; a glossy one is far above (inf: nothing off the peak). ``values``
+    (N, 3) in 1/sr at the angles ``theta_h``, ``theta_d`` (N,) (radians), e.g.
+    MERL samples."""
     v = np.asarray(values, dtype=np.float64)
     th, td = np.asarray(theta_h), np.asarray(theta_d)
     near = (th < math.radians(5)) & (td < math.radians(30))
     off = (th > math.radians(40)) & (th < math.radians(50)) & (td < math.radians(30))
     if not near.any() or not off.any():
         raise ValueError("the samples hold no angles near theta_h = 0 or 45 deg at theta_d < 30 deg")
-    return float(np.mean(np.median(v[near], axis=0) / np.maximum(np.median(v[off], axis=0), 1e-300)))
+    with np.errstate(over="ignore"):      # a peak over 1e8 with nothing off it: inf, all highlight
+        return float(np.mean(np.median(v[near], axis=0) / np.maximum(np.median(v[off], axis=0), 1e-300)))
 
 
 class Material:

@@ -115,7 +115,8 @@ class TexelSum:
                                                    self._world(fine), fine_omega, self._trace, nearest=highlights)
 
     # A TexelSum is never changed once made: a new light, BSDF or pixel subset
-    # is a new (shallow) copy that shares the geometry.
+    # is a new (shallow) copy that shares the geometry. (Its footprint_rays are
+    # traced on first use and kept: geometry of its own, not a change.)
     def with_map_size(self, map_size, samples=1, highlights=0) -> "TexelSum":
         """This view under an illumination map of ``map_size`` (H, W) texels, each
         lit from ``samples`` x ``samples`` directions (module doc), with the highlight
@@ -131,15 +132,14 @@ class TexelSum:
         pixel's footprint (module doc)."""
         directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         solid_angles = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
-        if directions.shape[0] == 1:
-            self.footprint_rays          # traced once, shared by every light of this view
-        out = copy.copy(self)
-        if directions.shape[0] == 1:
-            rays = out.footprint_rays
-            out._light(np.repeat(directions, rays.share.size, axis=0), solid_angles[0] * rays.share, None,
-                       per_texel=rays.side ** 2, ray_lanes=True)
-        else:
+        if directions.shape[0] > 1:
+            out = copy.copy(self)
             out._light(directions, solid_angles, None)
+            return out
+        rays = self.footprint_rays       # traced once, shared by every light of this view
+        out = copy.copy(self)
+        out._light(np.repeat(directions, rays.share.size, axis=0), solid_angles[0] * rays.share, None,
+                   per_texel=rays.side ** 2, ray_lanes=True)
         return out
 
     def with_point(self, position) -> "TexelSum":
