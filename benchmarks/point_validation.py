@@ -2,17 +2,19 @@
 
 The prior weights are shared by every kind of light, and a point light sees a
 narrow band of theta_d: the reflectance prior carries more of the answer there.
-This runs the validation materials (``benchmark_cases.VALIDATION_MATERIALS``)
-under a point light at two angles, with a GMM weight and the leave-one-out
-models' GMM structure (default: the shipped ones), and prints Eq. 20 (paper)
-beside the model's mean material (psi = 0).
+This runs the validation materials (``benchmark_cases.VALIDATION_MATERIALS``;
+with ``--set report`` the report set's, to check a choice) under a point light
+at two angles, with a GMM weight and the leave-one-out models' GMM structure
+(default: the shipped ones), and prints Eq. 20 (paper) beside the model's mean
+material (psi = 0).
 
     .venv/bin/python benchmarks/point_validation.py                       # 40 cases, ~3 min on 2 cores
     .venv/bin/python benchmarks/point_validation.py --gmm full:2:0.01 --w-gmm 100
     .venv/bin/python benchmarks/point_validation.py --config light_gmm_volume=0   # the GMM without its volume terms
+    .venv/bin/python benchmarks/point_validation.py --set report --config pixel_rays=1   # 24 cases
 
-Adds its setting's summary (cases better than the mean material, median and
-worst ratio to it, largest direction error) to
+Adds its setting's summary (cases better than the mean material in both
+conventions, median and worst ratio to it, the direction error, the time) to
 ``benchmarks/results/point_validation.json`` (``settings``, named by
 :func:`~mi_dsbrdf.evaluation.benchmark_cases.setting_name`) and its cases to
 ``out/point_validation/<setting>.json``.
@@ -26,8 +28,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from mi_dsbrdf.evaluation.benchmark_cases import (CACHE, DATA, OUT as OUT_ROOT, RESULTS, VALIDATION_MATERIALS,
-                                                  parse_config, setting_name)
+from mi_dsbrdf.evaluation.benchmark_cases import (CACHE, DATA, OUT as OUT_ROOT, REPORT_MATERIALS, RESULTS,
+                                                  VALIDATION_MATERIALS, parse_config, setting_name)
 
 #: the settings' summaries (the README and Config's docs quote it)
 SUMMARY = os.path.join(RESULTS, "point_validation.json")
@@ -56,12 +58,15 @@ def main(argv=None):
     ap.add_argument("--gmm", default=None, help="the leave-one-out models' GMM structure (default the build's)")
     ap.add_argument("--w-gmm", type=float, default=None, help="the GMM prior's weight (default Config's)")
     ap.add_argument("--config", nargs="*", help="other Config overrides, name=value (e.g. light_gmm_volume=0)")
+    ap.add_argument("--set", choices=("validation", "report"), default="validation",
+                    help="the materials: the validation set's (settings are chosen there) or the report set's")
     args = ap.parse_args(argv)
     weights = parse_config(args.config)
     if args.w_gmm is not None:
         weights["w_gmm"] = args.w_gmm
-    name = setting_name(weights, args.gmm)
-    jobs = [(m, a, weights, args.gmm) for m in VALIDATION_MATERIALS for a in ANGLES]
+    name = setting_name(weights, args.gmm) + ("" if args.set == "validation" else "-report")
+    materials = VALIDATION_MATERIALS if args.set == "validation" else REPORT_MATERIALS
+    jobs = [(m, a, weights, args.gmm) for m in materials for a in ANGLES]
     with ProcessPoolExecutor(2) as pool:
         rows = list(pool.map(_run, jobs))
     print("| material | angle | %s: paper (mean material) | direction error deg |\n|---|---|---|---|" % name)
@@ -88,7 +93,8 @@ def main(argv=None):
     settings = old.get("settings", {})
     settings[name] = {"summary": summary}
     with open(SUMMARY, "w") as f:
-        json.dump({"command": "python benchmarks/point_validation.py [--gmm S] [--w-gmm W] [--config k=v ...]",
+        json.dump({"command": "python benchmarks/point_validation.py [--set report] [--gmm S] [--w-gmm W] "
+                              "[--config k=v ...] (a report run's setting ends in -report)",
                    "settings": settings}, f, indent=1, sort_keys=True)
 
 
