@@ -131,7 +131,9 @@ def write_report(results_dir=OUT, docs_dir=DOCS) -> str:
           "MERL material, angle and probe) and `.venv/bin/python benchmarks/experiments.py --report`.",
           "Every case renders a MERL material (its neural fit, with the `merl` plugin) on a %d px sphere" % (
               rs[0]["case"]["res"] if rs else 64),
-          "and recovers it with a reflectance model that never saw it (leave-one-out bases and priors).",
+          "(under a point light each pixel the mean of 8×8 rays across it, as a camera's; the tool sees",
+          "4×4, `--pixel-rays`) and recovers it with a reflectance model that never saw it (leave-one-out",
+          "bases and priors).",
           "Eq. 20 is the BRDF's log-RMSE on the MERL grid after the best overall scale; Eq. 5 uses the",
           "known light intensity instead. Both are given in the paper's convention, log(f + 1e-6) (\"paper\"),",
           "and the cosine-weighted one, log(1 + f cos θi) (\"cosine\"), which hardly sees diffuse and dark",
