@@ -203,8 +203,8 @@ class LobeSum:
 
     def _column_sums(self, terms, n_terms):
         """Yield pixel ranges [p0, p1) and the sums of ``terms(lc, td, w)`` (``n_terms``
-        Dr.Jit Floats) over each pixel-texel pair's directions, (n_terms, p1 - p0, T)
-        float32: a light's rays in a Dr.Jit loop (:meth:`_ray_sums`), a map texel's
+        Dr.Jit Floats) over each pixel-texel pair's directions, n_terms arrays (p1 - p0,
+        T) float32: a light's rays in a Dr.Jit loop (:meth:`_ray_sums`), a map texel's
         directions in registers (:meth:`_rows`)."""
         if self.texels.ray_lanes:
             yield from self._ray_sums(terms, n_terms, JACOBIAN_CHUNK)
@@ -215,7 +215,7 @@ class LobeSum:
                 values = terms(lc, td, w)
                 cols = values if cols is None else [a + b for a, b in zip(cols, values)]
             dr.eval(*cols)
-            yield p0, p1, np.stack([c.numpy().reshape(p1 - p0, self.n_texels) for c in cols])
+            yield p0, p1, [c.numpy().reshape(p1 - p0, self.n_texels) for c in cols]     # not stacked: a copy
 
     def jacobian(self, material, illumination) -> LobeJacobian:
         """Radiance under ``illumination`` (T, 3) and its exact derivatives by every
@@ -230,7 +230,7 @@ class LobeSum:
         n_cols = R * (1 + 2 * N_CONTROL)
         for p0, p1, A in self._column_sums(terms, n_cols):          # A: (columns, pixels, texels)
             if self.n_texels == 1:                  # one light: the sum over texels is a product
-                flat = L[0][None, :, None] * A[:, None, :, 0]
+                flat = L[0][None, :, None] * np.asarray(A)[:, None, :, 0]
             else:
                 flat = np.stack([(a @ L).T for a in A])
             sums[..., p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
