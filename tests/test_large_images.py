@@ -183,7 +183,7 @@ def test_an_image_within_working_pixels_gives_the_answer_of_the_image_itself():
     b = mi_dsbrdf.recover(scene_dict, img, config=dataclasses.replace(cfg, working_pixels=1 << 30))
     # the pipeline on the image itself, the re-render in one call
     scene = mi.load_dict(scene_dict)
-    ts = TexelSum(scene, scene.shapes()[0], (1, 1))
+    ts = TexelSum(scene, scene.shapes()[0], (1, 1), pixel_rays=cfg.pixel_rays)
     keep = usable_pixels(ts.mask, img)
     rec = recover_light(ts, img, keep, shipped_model(), cfg, colour=True)
     lit = ts.with_directions(np.asarray(rec.light["direction"])[None], [1.0])
