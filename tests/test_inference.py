@@ -110,14 +110,17 @@ def test_unknown_directional_light_within_a_degree(observed):
     assert np.median(brdf_error(res, model, ts, scale_invariant=True)) < 0.05
 
 
-def test_unknown_point_light_at_a_finite_distance_within_a_degree():
+@pytest.mark.parametrize("rays", [1, 3])
+def test_unknown_point_light_at_a_finite_distance_within_a_degree(rays):
+    """From its own image formation: each pixel's centre ray, or 3 x 3 rays across it
+    (the search then runs on centre rays, the later rounds on the rays)."""
     pos = 5.0 * LIGHT
     s = sphere({"type": "dsbrdf", "material": TRUTH})
-    ts = TexelSum(s, s.shapes()[0], (1, 1)).with_point(pos)
+    ts = TexelSum(s, s.shapes()[0], (1, 1), pixel_rays=rays).with_point(pos)
     img = np.zeros((RES * RES, 3))
     img[ts.pixels] = ts.render(np.full((1, 3), 40.0))
     s2 = sphere({"type": "dsbrdf"})
-    ts2 = TexelSum(s2, s2.shapes()[0], (1, 1))
+    ts2 = TexelSum(s2, s2.shapes()[0], (1, 1), pixel_rays=rays)
     res = recover_light(ts2, img.reshape(RES, RES, 3), ts2.mask, model_data.shipped_model(),
                                         Config(max_rounds=3, block_iters=30), point=(np.zeros(3), 5.0))
     err = math.degrees(math.acos(min(1.0, float(res.light["direction"] @ LIGHT))))
