@@ -15,7 +15,7 @@ from mi_dsbrdf.evaluation import benchmark_cases as bc
 from mi_dsbrdf.evaluation import experiment as ev
 from mi_dsbrdf.evaluation import metrics
 from mi_dsbrdf.model import model_file as model_data
-from mi_dsbrdf.model.build import GMM, gmm_structure
+from mi_dsbrdf.model.build import GMM, gmm_structure, loo_model, model_file_hash
 from mi_dsbrdf.inference.pixels import interior
 from mi_dsbrdf.model.samples import samples_from_function
 
@@ -221,7 +221,7 @@ def test_run_case_scores_a_point_light(data, tmp_path):
     assert r["images"]["pisa"].shape == (2, 48, 48, 3)
     # keyed on the shipped model and the GMM structure: a rebuilt model does not reuse this one
     assert os.path.exists(tmp_path / "cache" / ("loo-gold-metallic-paint-%s-%s.npz" % (
-        ev.model_file_hash(), "-".join(map(str, gmm_structure(GMM))))))
+        model_file_hash(), "-".join(map(str, gmm_structure(GMM))))))
 
 
 @pytest.mark.slow
@@ -634,7 +634,7 @@ def test_natural_light_setting_names_carry_the_number_of_bases():
 def test_loo_model_with_another_number_of_bases(tmp_path):
     """``loo_model(..., k=)`` builds a leave-one-out model with k bases and a GMM in
     k dimensions, cached apart from the build's k."""
-    m = ev.loo_model("teflon", str(tmp_path), k=6)           # from the shipped model's stored fits
+    m = loo_model("teflon", str(tmp_path), k=6)           # from the shipped model's stored fits
     assert m.basis.bases.shape[0] == 6 and "teflon" not in m.library and len(m.library) == 99
     assert m.gmm.means.shape[1] == 6
     assert len(glob.glob(str(tmp_path / "*-k6.npz"))) == 1
@@ -652,11 +652,11 @@ def test_leave_one_out_models_from_another_build_s_fits(tmp_path):
     other = tmp_path / "other.npz"
     save_model(other, arrays)
     cache = str(tmp_path / "cache")
-    shipped = ev.loo_model("chrome", cache)
-    other_model = ev.loo_model("chrome", cache, fits_from=str(other))
-    assert ev.model_file_hash(str(other)) != ev.model_file_hash()
+    shipped = loo_model("chrome", cache)
+    other_model = loo_model("chrome", cache, fits_from=str(other))
+    assert model_file_hash(str(other)) != model_file_hash()
     assert os.path.exists(os.path.join(cache, "loo-chrome-%s-%s.npz" % (
-        ev.model_file_hash(str(other)), "-".join(map(str, gmm_structure(GMM))))))
+        model_file_hash(str(other)), "-".join(map(str, gmm_structure(GMM))))))
     assert "chrome" not in list(other_model.arrays["library_names"])
     gap = np.abs(other_model.arrays["mean"] - shipped.arrays["mean"]).max()
     np.testing.assert_allclose(gap, 3.0 / 99, rtol=1e-6)      # one of 99 fits moved by 3

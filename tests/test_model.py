@@ -184,7 +184,7 @@ def test_shipped_model_is_complete_and_sane():
 
 def test_shipped_priors_are_the_ones_the_benchmarks_leave_one_out_models_measure():
     """The benchmarks' leave-one-out models are built from the stored fits without
-    refits (``experiment.loo_model``); the shipped file's GMM and hue prior are
+    refits (``build.loo_model``); the shipped file's GMM and hue prior are
     what such a build gives with nothing left out, so the benchmarks measure the
     kind of priors a user gets (not priors fitted to the library's refits)."""
     a = shipped().arrays

@@ -15,7 +15,8 @@ import pytest
 from mi_dsbrdf.app.demo import brdf_errors
 from mi_dsbrdf.app.scenes import sphere_scene
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.evaluation.experiment import downsample, loo_model, shot_noise
+from mi_dsbrdf.evaluation.experiment import downsample, shot_noise
+from mi_dsbrdf.model.build import loo_model
 from mi_dsbrdf.evaluation.metrics import highlight_ratio, scale_invariant_log_error
 from mi_dsbrdf.inference import recover_envmap
 from mi_dsbrdf.inference.forward import TexelSum

@@ -109,7 +109,7 @@ def test_the_maps_spread_is_the_diagonal_of_plain_differences(recovered):
     each texel's log value, the gradient prior's from its majoriser's quadratic of a
     unit bump; texels no pixel sees are 0."""
     from mi_dsbrdf.inference.uncertainty import MAP_TEMPERATURE, illumination_spread
-    from mi_dsbrdf.inference.forward import apply_transport
+    from mi_dsbrdf.inference.transport import apply_transport
     model, ts, img, cfg, res = recovered
     post = Posterior(ts.with_map_size((8, 16)), img, ts.mask, model, cfg)
     log_map = np.log(np.where(res.seen[..., None], res.illumination / res.illumination[res.seen].mean(), 1.0))

@@ -27,7 +27,7 @@ A *case* is a plain dict (JSON, so a runner can ship it to any worker)::
 plugin evaluated by the texel-sum forward model; a probe at twice the
 recovered map's resolution, a point light at distance 5 with intensity 40 and
 each pixel the mean of PHOTO_PIXEL_RAYS x PHOTO_PIXEL_RAYS rays across it),
-recovers it with a leave-one-out model (:func:`loo_model`: the material's own
+recovers it with a leave-one-out model (:func:`~mi_dsbrdf.model.build.loo_model`: the material's own
 fit is left out of bases and priors) from the pixels the app would use
 (:func:`~mi_dsbrdf.inference.pixels.usable_pixels`: the silhouette ring dropped;
 every method alike) and scores it:
@@ -102,7 +102,7 @@ from mi_dsbrdf.inference.reflectance import reflectance_starts
 from mi_dsbrdf.inference.scene_dicts import camera, shape_dict
 from mi_dsbrdf.inference.uncertainty import MAP_TEMPERATURE
 from mi_dsbrdf.model import model_file as model_data
-from mi_dsbrdf.model.build import DEFAULT_K, GMM, build_from_fits, gmm_structure, save_model, stored_fits
+from mi_dsbrdf.model.build import loo_model
 from mi_dsbrdf.model.samples import samples_from_table
 
 #: the posterior band scored (``posterior``) and the temperatures it is scored at beside the shipped ones
@@ -178,38 +178,6 @@ def shot_noise(image, mask, photons, seed) -> np.ndarray:
     unit = float(img[np.asarray(mask, bool)].mean()) / float(photons)
     rng = np.random.default_rng(int.from_bytes(hashlib.sha256(str(seed).encode()).digest()[:8], "little"))
     return rng.poisson(np.maximum(img, 0.0) / unit) * unit
-
-
-def loo_model(name, cache, gmm=None, k=None, fits_from=None):
-    """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
-    library from the other 99 fits; the GMM of structure ``gmm``, default the
-    build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
-    the build's ``DEFAULT_K``; the full fits stored in the model file
-    ``fits_from``, default the shipped one, :func:`~mi_dsbrdf.model.build.build_from_fits`), cached as
-    ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``, h the first 12 hex digits of that
-    model file's SHA-256, so that a rebuilt model never reuses a leave-one-out
-    model of the one before.
-
-    The library is not refitted in the leave-one-out basis (its psi are the FPCA
-    scores; seconds instead of minutes): inference does not use it, and the
-    priors, as in a build, are fitted to the scores.
-    """
-    gmm = GMM if gmm is None else gmm
-    k = DEFAULT_K if k is None else int(k)
-    tag = "-".join(map(str, gmm_structure(gmm))) + ("" if k == DEFAULT_K else "-k%d" % k)
-    source = model_data.SHIPPED if fits_from is None else fits_from
-    path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, model_file_hash(source), tag))
-    if not os.path.exists(path):
-        arrays = model_data.load_model(source).arrays
-        save_model(path, build_from_fits(stored_fits(arrays), k=k, exclude=[name], refit=False, progress=False,
-                                         gmm=gmm))  # atomic
-    return model_data.load_model(path)
-
-
-def model_file_hash(path=None) -> str:
-    """First 12 hex digits of the SHA-256 of the shipped model file (or of ``path``)."""
-    with open(model_data.SHIPPED if path is None else path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()[:12]
 
 
 def specularity(name) -> float:

@@ -46,7 +46,8 @@ import numpy as np
 from mi_dsbrdf.brdf.angles import pair_geometry
 from mi_dsbrdf.inference.highlights import TEXEL_SIDE, HighlightPairs
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_directions
-from mi_dsbrdf.inference.rays import FootprintRays, centre_hits
+from mi_dsbrdf.inference.rays import FootprintRays, centre_hits, shadow_test
+from mi_dsbrdf.inference.transport import apply_transport
 
 #: Pixel-texel pairs evaluated per Dr.Jit launch (memory / speed trade-off).
 CHUNK = 1 << 22
@@ -85,9 +86,7 @@ class TexelSum:
         self.frames = tuple(np.array(v, dtype=np.float64) for v in (self.si.sh_frame.s, self.si.sh_frame.t,
                                                                     self.si.sh_frame.n, self.si.wi))
         self.positions = np.array(self.si.p, dtype=np.float64)
-        self.pixel_rays = int(pixel_rays)
-        if self.pixel_rays < 1:
-            raise ValueError("rays per pixel side must be >= 1, got %r" % (pixel_rays,))
+        self.pixel_rays = _rays_per_side(pixel_rays)
         self.bsdf = shape.bsdf()
         self._scene, self._sensor, self._shape, self._trace = scene, sensor, shape, visibility
         self._to_world = None if to_world is None else np.asarray(to_world, dtype=np.float64)[:3, :3]
@@ -132,14 +131,11 @@ class TexelSum:
         pixel's footprint (module doc)."""
         directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         solid_angles = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
-        if directions.shape[0] > 1:
-            out = copy.copy(self)
-            out._light(directions, solid_angles, None)
-            return out
-        rays = self.footprint_rays       # traced once, shared by every light of this view
+        if directions.shape[0] == 1:
+            return self._over_rays(lambda rays: (np.repeat(directions, rays.share.size, axis=0),
+                                                 solid_angles[0] * rays.share), None)
         out = copy.copy(self)
-        out._light(np.repeat(directions, rays.share.size, axis=0), solid_angles[0] * rays.share, None,
-                   per_texel=rays.side ** 2, ray_lanes=True)
+        out._light(directions, solid_angles, None)
         return out
 
     def with_point(self, position) -> "TexelSum":
@@ -148,12 +144,20 @@ class TexelSum:
         (module doc), so that its 'radiance' is the point light's intensity (W/sr,
         Mitsuba's ``point`` emitter)."""
         p = np.asarray(position, dtype=np.float64).reshape(3)
+
+        def light(rays):
+            d = p - rays.positions.T
+            r2 = np.maximum((d * d).sum(axis=1), 1e-12)
+            return d / np.sqrt(r2)[:, None], rays.share / r2
+        return self._over_rays(light, p)
+
+    def _over_rays(self, light, position) -> "TexelSum":
+        """This view under a point or directional light over each pixel's footprint:
+        ``light(footprint_rays)`` gives each ray's direction (N, 3) and solid angle
+        times its share (N,)."""
         rays = self.footprint_rays       # traced once, shared by every light of this view
         out = copy.copy(self)
-        d = p - rays.positions.T
-        r2 = np.maximum((d * d).sum(axis=1), 1e-12)
-        out._light(d / np.sqrt(r2)[:, None], rays.share / r2, p,           # per ray
-                   per_texel=rays.side ** 2, ray_lanes=True)
+        out._light(*light(rays), position, per_texel=rays.side ** 2, ray_lanes=True)
         return out
 
     def with_pixel_rays(self, pixel_rays) -> "TexelSum":
@@ -163,9 +167,7 @@ class TexelSum:
             raise ValueError("with_pixel_rays: this view is lit already; change the rays before the light")
         out = copy.copy(self)
         out.__dict__.pop("footprint_rays", None)
-        out.pixel_rays = int(pixel_rays)
-        if out.pixel_rays < 1:
-            raise ValueError("rays per pixel side must be >= 1, got %r" % (pixel_rays,))
+        out.pixel_rays = _rays_per_side(pixel_rays)
         return out
 
     @functools.cached_property
@@ -255,51 +257,16 @@ class TexelSum:
         return [(t, min(t + step, self.n_directions)) for t in range(0, self.n_directions, step)]
 
     def _trace_visibility(self, scene):
-        """(P, n_directions) bool: the light of each pixel-direction pair reaches the
-        surface point, by shadow rays (``scene.ray_test``) through the whole scene,
-        so that the object shadows itself and every other shape shadows it. Pairs
-        with the light or the camera below the surface are left True (their weight
-        is zero). A ray runs towards the direction to infinity (a texel's direction,
-        a directional light), or to the point light's position."""
-        P, nd = self.n_pixels, self.n_directions
-        point = self.light_position is not None
-        n_light = self.directions.shape[0]
-        # the surface points: a light's rays (one per lane), or the pixels' centre hits
+        """(P, n_directions) bool: the light of each pixel-direction pair reaches its
+        surface point (:func:`~mi_dsbrdf.inference.rays.shadow_test`): a light's rays
+        (one per lane), or the pixels' centre hits."""
         if self.ray_lanes:
             rays = self.footprint_rays
-            positions, n, frames, width = rays.positions, rays.normals, rays.frames, P * nd
-        else:       # the geometric normal offsets the rays
-            positions, n, frames, width = self.positions, np.array(self.si.n, dtype=np.float64), self.frames, P
-        # All inputs in one array, gathered (no literals, one fresh array): a new
-        # light then runs the same kernel, not a new one (a light search traces
-        # hundreds of point lights)
-        target = np.zeros(3) if self.light_position is None else self.light_position
-        buf = mi.Float(np.concatenate([positions.reshape(-1), n.reshape(-1), *(f.reshape(-1) for f in frames),
-                                       self.directions.T.reshape(-1), target]).astype(np.float32))
-        light0 = 18 * width
-        vis = np.ones((P, nd), dtype=bool)
-        for t0, t1 in self._chunks():
-            nt = t1 - t0
-            lane = dr.arange(mi.UInt32, P * nt)
-            pix = lane // nt
-            tex = lane - pix * nt + dr.opaque(mi.UInt32, t0)
-            geo = pix * nd + tex if self.ray_lanes else pix          # the lane's surface point
-            per_light = geo if self.ray_lanes else tex
-
-            def vec(first, index, width):
-                return mi.Vector3f(*(dr.gather(mi.Float, buf, index + (first + k) * width) for k in range(3)))
-            si = dr.zeros(mi.SurfaceInteraction3f, P * nt)
-            si.p, si.n = mi.Point3f(vec(0, geo, width)), mi.Normal3f(vec(3, geo, width))
-            frame = mi.Frame3f(vec(6, geo, width), vec(9, geo, width), vec(12, geo, width))
-            wi_z = dr.gather(mi.Float, buf, geo + 17 * width)
-            wo = frame.to_local(vec(0, per_light + light0, n_light))
-            if point:
-                ray = si.spawn_ray_to(mi.Point3f(vec(0, dr.zeros(mi.UInt32, P * nt) + light0 + 3 * n_light, 1)))
-            else:
-                ray = si.spawn_ray(frame.to_world(wo))
-            blocked = scene.ray_test(ray, (wo.z > 0) & (wi_z > 0))
-            vis[:, t0:t1] = ~blocked.numpy().reshape(P, nt)
-        return vis
+            points, normals, frames = rays.positions, rays.normals, rays.frames
+        else:
+            points, normals, frames = self.positions, np.array(self.si.n, dtype=np.float64), self.frames
+        return shadow_test(scene, points, normals, frames, self.directions, self.light_position,
+                           self.n_pixels, self.n_directions, self._chunks(), self.ray_lanes)
 
     def _weights(self, si, wo, light, t0, t1):
         """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f
@@ -400,28 +367,11 @@ class TexelSum:
         return image, jac
 
 
-def apply_transport(T, illumination) -> np.ndarray:
-    """(P, 3) float64 radiance of the map ``illumination`` (T texels x 3) under the
-    channel-major transport ``T`` (3, P, T) of :meth:`TexelSum.transport`."""
-    L, scale = unit_scaled(illumination)
-    return np.stack([T[c] @ L[:, c] for c in range(3)], axis=1).astype(np.float64) * scale
-
-
-def transport_adjoint(T, grad_pixels) -> np.ndarray:
-    """(T texels, 3) float64: d loss / d L from d loss / d radiance ``grad_pixels``
-    (P, 3), the transpose of :func:`apply_transport`."""
-    g, scale = unit_scaled(grad_pixels)
-    return np.stack([g[:, c] @ T[c] for c in range(3)], axis=1).astype(np.float64) * scale
-
-
-def unit_scaled(values) -> tuple:
-    """((N, 3) float32 values / s, s) with s the largest |value|: the float32 products
-    of a bright sun (1e5) with a sharp lobe's transport (e^60 * solid angle) would
-    overflow; scaled to at most 1 they cannot."""
-    v = np.asarray(values, dtype=np.float64).reshape(-1, 3)
-    s = float(np.abs(v).max()) if v.size else 0.0
-    s = s if s > 0 and np.isfinite(s) else 1.0
-    return (v / s).astype(np.float32), s
+def _rays_per_side(value) -> int:
+    """``pixel_rays`` as an int; ValueError below 1."""
+    if int(value) < 1:
+        raise ValueError("rays per pixel side must be >= 1, got %r" % (value,))
+    return int(value)
 
 
 def _forward_columns(partial, variables):

@@ -127,14 +127,14 @@ def recover_light(texels: TexelSum, observed, mask, model, config: Config = None
     cfg = config or Config()
     # the light is white by assumption (its colour is the material's): the priors that
     # split the image's colour between material and light are a map's
-    post = Posterior(texels, observed, mask, model, cfg.with_colour_split(False), point=point,
-                     gmm_volume=LIGHT_GMM_VOLUME)
+    def posterior(view):
+        return Posterior(view, observed, mask, model, cfg.with_colour_split(False), point=point,
+                         gmm_volume=LIGHT_GMM_VOLUME)
+    post = posterior(texels)
     # the search and the first round see each pixel through its centre ray (most of
     # the evaluations); the later rounds refine material and light over the pixels'
     # footprints (TexelSum.pixel_rays)
-    search = post if texels.pixel_rays == 1 else Posterior(
-        texels.with_pixel_rays(1), observed, mask, model, cfg.with_colour_split(False), point=point,
-        gmm_volume=LIGHT_GMM_VOLUME)
+    search = post if texels.pixel_rays == 1 else posterior(texels.with_pixel_rays(1))
     logits = image_chroma_logits(post.observed, post.keep, post.R)
     psi = np.zeros(post.k)
     t0 = time.perf_counter()

@@ -36,7 +36,8 @@ import numpy as np
 from mi_dsbrdf.brdf.curves import N_CONTROL, spline_basis
 from mi_dsbrdf.brdf.dsbrdf import LOG_COS_H_MIN, lobe_curves, lobe_rgb, lobe_value
 from mi_dsbrdf.brdf.observed import N_CELLS, DirectionWeights, cell_sums
-from mi_dsbrdf.inference.forward import TexelSum, apply_transport, unit_scaled
+from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.inference.transport import apply_transport, unit_scaled
 
 #: pairs per kernel launch: the transport writes 3 floats a pair (a 128x128 sphere
 #: under a 32x64 map, 24.5M pairs, in one launch), the Jacobian 39
@@ -235,7 +236,7 @@ class LobeSum:
                 flat = np.stack([(a @ L).T for a in A])
             sums[..., p0:p1] = flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         h = self.texels.highlights
-        for p0, p1, A in self._highlight_sums(terms, R * (1 + 2 * N_CONTROL), JACOBIAN_CHUNK):
+        for p0, p1, A in self._highlight_sums(terms, n_cols, JACOBIAN_CHUNK):
             flat = np.einsum("npk,pkc->ncp", A, L[h.texels[p0:p1]])          # A: (columns, pixels, K)
             sums[..., p0:p1] += flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         sums *= s

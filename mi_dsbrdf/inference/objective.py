@@ -23,7 +23,8 @@ import numpy as np
 from mi_dsbrdf.brdf.chromaticity import softmax_chroma
 from mi_dsbrdf.brdf.dsbrdf import Material, log_lobe_energy
 from mi_dsbrdf.config import Config
-from mi_dsbrdf.inference.forward import TexelSum, apply_transport, transport_adjoint
+from mi_dsbrdf.inference.forward import TexelSum
+from mi_dsbrdf.inference.transport import apply_transport, transport_adjoint
 from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.illumination_priors import EntropyPrior, GradientPrior, LightColourPrior
 from mi_dsbrdf.inference.likelihood import KINK, log_likelihood_terms

@@ -1,5 +1,6 @@
 """Camera rays onto the object: through each pixel's centre, or a regular grid of
-points over each pixel's area (what a box pixel filter averages)."""
+points over each pixel's area (what a box pixel filter averages); and shadow rays
+from the surface points they hit towards the light."""
 from __future__ import annotations
 
 import dataclasses
@@ -86,3 +87,52 @@ class FootprintRays:
         return FootprintRays(self.side, dr.gather(mi.SurfaceInteraction3f, self.si, mi.UInt32(rays.astype(np.uint32))),
                              tuple(f[:, rays] for f in self.frames), self.positions[:, rays], self.normals[:, rays],
                              self.share[rays])
+
+
+def shadow_test(scene, points, normals, frames, directions, position, n_pixels, n_directions, chunks,
+                ray_lanes) -> np.ndarray:
+    """(n_pixels, n_directions) bool: the light of each pixel-direction pair reaches
+    the surface point, by shadow rays (``scene.ray_test``) through the whole scene,
+    so that the object shadows itself and every other shape shadows it. Pairs with
+    the light or the camera below the surface are left True (their weight is zero).
+    A ray runs towards the direction to infinity (a texel's direction, a directional
+    light), or to the point light's ``position`` (None: none).
+
+    ``points``, ``normals`` (3, N) and ``frames`` ((s, t, n, wi), (3, N) each): one
+    per pixel (N = n_pixels), or with ``ray_lanes`` one per pair (a light's rays, N =
+    n_pixels * n_directions); ``directions`` (M, 3): per direction of a pixel, or
+    with ``ray_lanes`` per pair; ``chunks``: direction ranges [t0, t1) traced at once.
+    """
+    P, nd = n_pixels, n_directions
+    n_light = directions.shape[0]
+    width = P * nd if ray_lanes else P
+    # All inputs in one array, gathered (no literals, one fresh array): a new
+    # light then runs the same kernel, not a new one (a light search traces
+    # hundreds of point lights)
+    target = np.zeros(3) if position is None else position
+    buf = mi.Float(np.concatenate([points.reshape(-1), normals.reshape(-1), *(f.reshape(-1) for f in frames),
+                                   directions.T.reshape(-1), target]).astype(np.float32))
+    light0 = 18 * width
+    vis = np.ones((P, nd), dtype=bool)
+    for t0, t1 in chunks:
+        nt = t1 - t0
+        lane = dr.arange(mi.UInt32, P * nt)
+        pix = lane // nt
+        tex = lane - pix * nt + dr.opaque(mi.UInt32, t0)
+        geo = pix * nd + tex if ray_lanes else pix          # the lane's surface point
+        per_light = geo if ray_lanes else tex
+
+        def vec(first, index, width):
+            return mi.Vector3f(*(dr.gather(mi.Float, buf, index + (first + k) * width) for k in range(3)))
+        si = dr.zeros(mi.SurfaceInteraction3f, P * nt)      # the geometric normal offsets the rays
+        si.p, si.n = mi.Point3f(vec(0, geo, width)), mi.Normal3f(vec(3, geo, width))
+        frame = mi.Frame3f(vec(6, geo, width), vec(9, geo, width), vec(12, geo, width))
+        wi_z = dr.gather(mi.Float, buf, geo + 17 * width)
+        wo = frame.to_local(vec(0, per_light + light0, n_light))
+        if position is not None:
+            ray = si.spawn_ray_to(mi.Point3f(vec(0, dr.zeros(mi.UInt32, P * nt) + light0 + 3 * n_light, 1)))
+        else:
+            ray = si.spawn_ray(frame.to_world(wo))
+        blocked = scene.ray_test(ray, (wo.z > 0) & (wi_z > 0))
+        vis[:, t0:t1] = ~blocked.numpy().reshape(P, nt)
+    return vis

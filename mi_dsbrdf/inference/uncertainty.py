@@ -19,7 +19,7 @@ import numpy as np
 
 from mi_dsbrdf.brdf.curves import N_CONTROL
 from mi_dsbrdf.brdf.dsbrdf import LOBE_PARAMETERS, NO_HIGHLIGHT, passed_through
-from mi_dsbrdf.inference.forward import apply_transport
+from mi_dsbrdf.inference.transport import apply_transport
 from mi_dsbrdf.inference.reflectance import (chroma_prior_hessian, log_residuals, material_columns,
                                              prior_derivatives)
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 import glob
+import hashlib
 import json
 import multiprocessing
 import os
@@ -39,7 +40,7 @@ from mi_dsbrdf.model import samples
 from mi_dsbrdf.model.fit_problem import OBJECTIVE, FitObjective
 from mi_dsbrdf.model.fitting import fit_basis, fit_full
 from mi_dsbrdf.model.fpca import fpca
-from mi_dsbrdf.model.model_file import load_model
+from mi_dsbrdf.model.model_file import SHIPPED, load_model
 from mi_dsbrdf.model.priors import fit_gmm, fit_hue_concentration, select_gmm
 
 DEFAULT_K = 10
@@ -289,3 +290,35 @@ def save_model(path, arrays) -> None:
     tmp = "%s.%d.tmp.npz" % (path, os.getpid())
     np.savez_compressed(tmp, **arrays)
     os.replace(tmp, path)
+
+
+def loo_model(name, cache, gmm=None, k=None, fits_from=None):
+    """The reflectance model rebuilt without ``name`` (bases, GMM, hue prior and
+    library from the other 99 fits; the GMM of structure ``gmm``, default the
+    build's, :func:`~mi_dsbrdf.model.build.gmm_structure`; ``k`` bases, default
+    the build's ``DEFAULT_K``; the full fits stored in the model file
+    ``fits_from``, default the shipped one, :func:`~mi_dsbrdf.model.build.build_from_fits`), cached as
+    ``cache/loo-<name>-<h>-<gmm>[-k<k>].npz``, h the first 12 hex digits of that
+    model file's SHA-256, so that a rebuilt model never reuses a leave-one-out
+    model of the one before.
+
+    The library is not refitted in the leave-one-out basis (its psi are the FPCA
+    scores; seconds instead of minutes): inference does not use it, and the
+    priors, as in a build, are fitted to the scores.
+    """
+    gmm = GMM if gmm is None else gmm
+    k = DEFAULT_K if k is None else int(k)
+    tag = "-".join(map(str, gmm_structure(gmm))) + ("" if k == DEFAULT_K else "-k%d" % k)
+    source = SHIPPED if fits_from is None else fits_from
+    path = os.path.join(cache, "loo-%s-%s-%s.npz" % (name, model_file_hash(source), tag))
+    if not os.path.exists(path):
+        arrays = load_model(source).arrays
+        save_model(path, build_from_fits(stored_fits(arrays), k=k, exclude=[name], refit=False, progress=False,
+                                         gmm=gmm))  # atomic
+    return load_model(path)
+
+
+def model_file_hash(path=None) -> str:
+    """First 12 hex digits of the SHA-256 of the shipped model file (or of ``path``)."""
+    with open(SHIPPED if path is None else path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()[:12]
