@@ -234,7 +234,7 @@ def test_second_route_runs_only_above_its_highlight_and_the_lower_posterior_wins
     round is lower, repeated in a last "answer" row; far above any answer it never
     runs, and the run is the one without a second route (None), number for number."""
     model, ts, img = sky_case()
-    base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10)
+    base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10, highlight_texels=0)
     off, never, always = (recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, second_route_highlight=h))
                           for h in (None, 1e9, 1e-9))
     assert [r["neg_log_posterior"] for r in never.log] == [r["neg_log_posterior"] for r in off.log]
@@ -340,6 +340,34 @@ def test_an_orange_light_goes_into_the_map_not_the_material():
     assert abs(np.log(red_over_blue[1.0][0] / truth[0])) < abs(np.log(red_over_blue[0.0][0] / truth[0]))
 
 
+def test_the_highlight_pairs_refine_the_answer_only_where_they_change_its_image():
+    """``Config.highlight_texels``, ``highlight_check``: the answer's image with and
+    without the highlight pairs is compared (``Recovery.highlight_change``, the pairs'
+    own re-render against the texel sum's); above the check a "highlights" pass goes on
+    from the answer with them, and the Recovery says it was fitted with them; below it
+    the run is the one without pairs, number for number."""
+    from mi_dsbrdf.inference.lobes import LobeSum
+    model, ts, img = sky_case()
+    base = Config(map_size=(8, 16), max_rounds=1, block_iters=3, illumination_iters=10, second_route_highlight=None)
+    none, never, always = (recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, **kw))
+                           for kw in ({"highlight_texels": 0}, {"highlight_check": 1e9}, {"highlight_check": 0.0}))
+    assert none.highlight_change is None and none.highlight_texels == 0
+    assert [r["neg_log_posterior"] for r in never.log] == [r["neg_log_posterior"] for r in none.log]
+    np.testing.assert_array_equal(never.psi, none.psi)
+    assert never.highlight_texels == 0
+    # the change is the pairs' re-render of the answer against the texel sum's
+    L = np.asarray(never.illumination).reshape(-1, 3)
+    plain = LobeSum(ts.with_map_size((8, 16), base.texel_samples)).render(never.material, L)
+    pairs = LobeSum(ts.with_map_size((8, 16), base.texel_samples, 25)).render(never.material, L)
+    assert never.highlight_change > 0
+    assert never.highlight_change == pytest.approx(np.abs(pairs - plain).sum() / np.abs(pairs).sum(), rel=0.05)
+    passes = [r["pass"] for r in always.log]
+    assert passes[:len(none.log)] == [r["pass"] for r in none.log] and passes[len(none.log):] == ["highlights"]
+    assert always.highlight_texels == 25 and always.log[-1]["highlight_change"] == always.highlight_change
+    with pytest.raises(ConfigError, match="highlight_check"):
+        Config(highlight_check=-1.0)
+
+
 def test_the_colour_split_priors_leave_the_start_and_the_grey_pass_alone(observed):
     """The chromaticity and light-colour priors act in the colour pass only: the
     start and the grey pass of a run with them are those of a run without, number
@@ -353,7 +381,7 @@ def test_the_colour_split_priors_leave_the_start_and_the_grey_pass_alone(observe
     runs = [recover_envmap(ts, img, ts.mask, model, dataclasses.replace(base, **kw),
                            starts=[np.zeros(model.basis.n_bases)])
             for kw in ({"w_chromaticity": 0.0, "w_light_colour": 0.0}, {"w_chromaticity": 1.0, "w_light_colour": 1.0})]
-    before = [[r["neg_log_posterior"] for r in res.log if r["pass"] != "colour"] for res in runs]
+    before = [[r["neg_log_posterior"] for r in res.log if r["pass"] in ("start", "grey")] for res in runs]
     assert before[0] == before[1]
     assert "chromaticity" in runs[1].log[-1] and "chromaticity" not in runs[0].log[-1]
     ts = dsbrdf_view((1, 1))

@@ -14,7 +14,6 @@ from mi_dsbrdf.app.demo import SUN, sunsky
 from mi_dsbrdf.app.io import write_exr
 from mi_dsbrdf.app.scenes import scene_path
 from mi_dsbrdf.brdf.dsbrdf import Material
-from mi_dsbrdf.config import Config
 from mi_dsbrdf.inference.latlong import procedural_sky
 from mi_dsbrdf.inference.scene_dicts import camera
 from mi_dsbrdf.model import model_file
@@ -137,7 +136,7 @@ def test_a_sharp_lobe_on_a_small_sphere_renders_in_mitsuba_as_recovered(tmp_path
     sky = os.path.join(tmp_path, "sky.exr")
     write_exr(sky, procedural_sky(128, 256))
     gap, noise = round_trip(tmp_path, '<bsdf type="dsbrdf"><string name="filename" value="%s"/></bsdf>' % truth,
-                            sky, 32, Config(highlight_texels=25))
+                            sky, 32)
     assert noise < 0.015 and gap < 0.05, (noise, gap)
 
 
@@ -147,5 +146,5 @@ def test_a_metal_under_a_real_probe_renders_in_mitsuba_as_recovered(tmp_path, nb
     highlight pairs: within 4 % (15 % from the pixels' centre rays alone)."""
     probe = data_path("envmaps", "probulator", "grace.hdr")
     gap, noise = round_trip(tmp_path, '<bsdf type="merl"><string name="nbrdf" value="%s"/><string name="material" '
-                            'value="chrome"/></bsdf>' % nbrdf_file, probe, 64, Config(highlight_texels=25))
+                            'value="chrome"/></bsdf>' % nbrdf_file, probe, 64)
     assert noise < 0.015 and gap < 0.04, (noise, gap)

@@ -106,7 +106,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     ts = TexelSum(working_scene(scene, grid), obj, cfg.map_size if needs.envmap_block else (1, 1),
                   visibility=needs.visibility, to_world=envmap_rotation(scene) if needs.envmap_block else None,
                   samples=cfg.texel_samples if needs.envmap_block else 1,     # the re-render as inference saw it
-                  highlights=cfg.highlight_texels if needs.envmap_block else 0, pixel_rays=cfg.pixel_rays)
+                  pixel_rays=cfg.pixel_rays)
     keep = usable_blocks(grid, ts.mask, on_object, obs, user_mask, levels)
     if keep.sum() < MIN_PIXELS:
         raise InputError("only %d usable pixels (on the object, inside the mask, unsaturated, off the silhouette); "
@@ -117,7 +117,10 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     try:
         if needs.envmap_block:
             rec = recover_envmap(ts, work, keep, model, cfg, colour=needs.colour_pass, progress=report)
-            light, lit, L = None, ts, rec.illumination.reshape(-1, 3)
+            # the re-render as the answer was fitted: with the highlight pairs if it was
+            lit = ts.with_map_size(cfg.map_size, cfg.texel_samples, rec.highlight_texels) if rec.highlight_texels \
+                else ts
+            light, L = None, rec.illumination.reshape(-1, 3)
         else:
             point = (centre(obj), point_light_distance(scene, obj)) if needs.light == "point" else None
             rec = recover_light(ts, work, keep, model, cfg, progress=report, point=point, colour=needs.colour_pass)
@@ -163,7 +166,8 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
            "working_grid": grid.log(),
            "seconds": rec.seconds,
            "unseen_texels": rows[-1].get("unseen_texels") if rows else None,
-           "highlight_doubt": rec.highlight_doubt, "flags": flags}
+           "highlight_doubt": rec.highlight_doubt, "flags": flags,
+           "highlight_change": rec.highlight_change, "highlight_texels": rec.highlight_texels}
     log["residual"] = relative_residual(obs, rerender, used)
     return Result(material=material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
                   image=obs, used=used, rerender=rerender, scene_source=source,
@@ -291,6 +295,7 @@ def _printing(progress) -> bool:
 
 #: the progress bar of each logged pass: {pass: (description, unit)}
 PASSES = {"start": ("starts", "start"), "grey": ("grey pass", "round"), "colour": ("colour pass", "round"),
+          "highlights": ("highlight pass", "round"),
           "light search": ("light search", "direction"), "light": ("light pass", "round")}
 
 
@@ -308,6 +313,7 @@ def _progress(progress, cfg, needs, model):
     for line in needs.reasons:
         print("  " + line, flush=True)
     totals = {"start": len(reflectance_starts(model)), "grey": cfg.max_rounds, "colour": cfg.max_rounds,
+              "highlights": cfg.max_rounds,
               "light search": SEARCH_CANDIDATES, "light": cfg.max_rounds}
     state = {"bar": None, "pass": None, "since": time.time()}
 

@@ -47,6 +47,15 @@ priors (``Config.w_chromaticity``, ``w_light_colour``; on by default), every
 colour round from the second first moves along that product
 (:func:`colour_split`), which neither block can do alone, and keeps the move
 only if the posterior falls.
+
+Highlight pairs (``Config.highlight_texels``, ``highlight_check``; not in the
+paper): the texel sum sees each pixel through its centre ray. The answer's
+image is rendered once more with the texels nearest each pixel's mirror
+direction integrated over the pixel's area and the texel
+(:mod:`~mi_dsbrdf.inference.highlights`); where that changes it by
+``highlight_check`` or more (:func:`highlight_change`), a lobe is sharper than
+a pixel's footprint, and the last pass goes on with the pairs (rows
+``{"pass": "highlights"}``), so that the answer renders as Mitsuba renders it.
 """
 from __future__ import annotations
 
@@ -63,6 +72,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
+from mi_dsbrdf.inference.transport import apply_transport
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 from mi_dsbrdf.inference.uncertainty import highlight_doubt, illumination_spread, laplace
@@ -111,10 +121,9 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # the coarse start has fewer texels, but it only chooses among the starts
     max_pixels = cfg.map_pairs // (cfg.map_size[0] * cfg.map_size[1])
 
-    def posterior(size, pass_name):
-        samples, highlights, pass_cfg = cfg.texel_samples, cfg.highlight_texels, cfg
+    def posterior(size, pass_name, highlights=0):
+        samples, pass_cfg = cfg.texel_samples, cfg
         if pass_name in ("start", "grey"):
-            highlights = 0
             if cfg.grey_texel_samples is not None:
                 samples = cfg.grey_texel_samples
             # the start and the grey pass hold the lobes at the image's colour and the
@@ -153,11 +162,23 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         log({**{k: v for k, v in (rows[-1] if won else first_last).items() if k not in ("route", "seconds")},
              "pass": "answer", "answer_route": won})
         end, loser = (end, other)[won], (end, other)[1 - won]
+    # the highlight pairs (Config.highlight_texels, highlight_check): where they change
+    # the answer's image, a lobe is sharper than a pixel's footprint and the last pass
+    # goes on with them, so that the answer renders as Mitsuba renders it
+    last_pass = "colour" if colour else "grey"
+    last = posterior(cfg.map_size, last_pass)
+    change, used_pairs = None, 0
+    if cfg.highlight_texels:
+        pairs = posterior(cfg.map_size, last_pass, cfg.highlight_texels)
+        change = highlight_change(last, pairs, *end[:4])
+        if change >= cfg.highlight_check:
+            end = alternate(pairs, last_pass, cfg.map_size, *end[:3], cfg,
+                            lambda row: log(dict(row, **{"pass": "highlights", "highlight_change": change})))
+            last, used_pairs = pairs, cfg.highlight_texels
     psi, logits, log_map, seen, _ = end
     chroma = softmax_chroma(logits)
     # the material's posterior with the map at its MAP, on the last pass's posterior
     t_posterior = time.perf_counter()
-    last = posterior(cfg.map_size, "colour" if colour else "grey")
     posterior_of_material = laplace(last, psi, logits, np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3),
                                     fit_chroma=colour)
     material = Material.from_basis(model.basis, psi, chroma, name="recovered")
@@ -174,7 +195,18 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                     chromaticity=chroma, illumination=np.where(seen[..., None], np.exp(log_map) * exposure, 0.0),
                     seen=seen, log=rows, laplace=posterior_of_material, illumination_spread=spread,
                     posterior_seconds=time.perf_counter() - t_posterior, other_mode=other_material,
-                    other_mode_gap=gap)
+                    other_mode_gap=gap, highlight_change=change, highlight_texels=used_pairs)
+
+
+def highlight_change(plain, pairs, psi, logits, log_map, seen) -> float:
+    """Relative L1 change, over the usable pixels of the posterior ``plain``, of the
+    image of the material (psi, logits) under the log map (unseen texels black) when
+    the highlight pairs integrate the texels nearest each mirror direction (``pairs``,
+    the same pixels: :mod:`~mi_dsbrdf.inference.highlights`)."""
+    L = np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3)
+    a = apply_transport(plain.transport(psi, logits), L)[plain.keep]
+    b = apply_transport(pairs.transport(psi, logits), L)[pairs.keep]
+    return float(np.abs(b - a).sum() / max(float(np.abs(b).sum()), 1e-300))
 
 
 def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> tuple:

@@ -37,6 +37,12 @@ class Recovery:
         (``Config.second_route_highlight``): a second mode of the same posterior,
         as a :class:`~mi_dsbrdf.brdf.dsbrdf.Material`; None otherwise
     other_mode_gap : its negative log posterior above the answer's (>= 0)
+    highlight_change : under a map, the relative change of the answer's image when
+        the highlight pairs integrate each pixel's mirror direction over its area
+        (:func:`~mi_dsbrdf.inference.envmap.highlight_change`); None if not checked
+    highlight_texels : the highlight pairs' texels per pixel the answer was fitted
+        with (``Config.highlight_texels`` where ``highlight_change`` reached
+        ``Config.highlight_check``, else 0); its re-render needs the same
     laplace : the material's posterior at the MAP
         (:class:`~mi_dsbrdf.inference.uncertainty.Laplace`); ``material`` carries
         its covariance (``Material.covariance_factor``)
@@ -54,6 +60,8 @@ class Recovery:
     other_mode: Material = None
     other_mode_gap: float = None
     highlight_doubt: float = None
+    highlight_change: float = None
+    highlight_texels: int = 0
 
     @property
     def neg_log_posterior(self) -> float:
