@@ -160,7 +160,9 @@ def case(material, probe, res, args) -> dict:
             "mitsuba_vs_photo": relative_l1(mitsuba, photo, used),
             # the two seeds differ by sqrt(2) times one render's noise, and their mean
             # has 1/sqrt(2) of it: half their difference is the mean's noise
-            "noise": relative_l1(renders[0], renders[1], used) / 2}
+            "noise": relative_l1(renders[0], renders[1], used) / 2,
+            "highlight_change": result.log.get("highlight_change"),
+            "highlight_texels": result.log.get("highlight_texels")}
 
 
 #: --footprint: the map (texels), Mitsuba's samples per pixel, the forward model's
@@ -272,6 +274,9 @@ def main(argv=None):
     excess = [r["mitsuba_vs_photo"] - r["rerender_vs_photo"] for r in rows]
     print("Mitsuba vs photo minus re-render vs photo: median %+.1f %%, worst %+.1f %% (target <= +1 %%)"
           % (100 * np.median(excess), 100 * max(excess)))
+    refined = [r["case"] for r in rows if r.get("highlight_texels")]
+    print("fitted with the highlight pairs: %d of %d (%s); median time %.1f s"
+          % (len(refined), len(rows), ", ".join(refined) or "none", np.median([r["seconds"] for r in rows])))
     run = args.set + ("" if args.light == "envmap" else "-" + args.light)
     out = args.out or (os.path.join(OUT, "mitsuba_roundtrip", run, args.setting_name, "summary.json")
                        if args.config else os.path.join(RESULTS, "mitsuba_roundtrip_%s%s.json" % (

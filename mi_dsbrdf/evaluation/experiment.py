@@ -67,7 +67,8 @@ every method alike) and scores it:
   of :data:`TEMPERATURES` and the shipped ones, and the seconds they took within the recovery's;
 * ``other_mode`` (probes with this tool, where the second route ran): the posterior's other mode
   against the answer and the truth (:func:`~mi_dsbrdf.evaluation.metrics.mode_scores`);
-* ``highlight_doubt`` and ``flags`` (this tool's answers): what ``Recovery`` says of them;
+* ``highlight_doubt``, ``flags``, ``highlight_change`` and ``highlight_texels`` (this tool's
+  answers): what ``Recovery`` says of them;
 * ``terms``: the last logged round's negative log posterior term by term
   (likelihood, each weighted prior; probes with this tool);
 * ``trace``: the negative log posterior of every logged round, ``rounds``,
@@ -312,6 +313,7 @@ def run_case(case: dict, data: str, cache: str, threads: int = 0) -> dict:
     out.update(observed_split(values, samples, where))
     if laplace is not None:
         out["highlight_doubt"], out["flags"] = result.highlight_doubt, result.flags
+        out["highlight_change"], out["highlight_texels"] = result.highlight_change, result.highlight_texels
         # the posterior band at each temperature, the shipped ones among them
         out["posterior"] = {"level": BAND_LEVEL, "default": laplace.temperature, "map_default": MAP_TEMPERATURE,
                             "seconds": posterior_seconds, "temperature": posterior_scores(
