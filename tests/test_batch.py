@@ -96,7 +96,7 @@ def test_batch_runs_the_good_rows_reports_the_bad_and_resumes(folder, tmp_path, 
 
 
 def test_relative_residual_in_bands_equals_the_whole():
-    from mi_dsbrdf.app.recover import relative_residual
+    from mi_dsbrdf.app.result import relative_residual
     rng = np.random.default_rng(0)
     image, rerender = rng.random((7, 5, 3)) + 0.1, rng.random((7, 5, 3)) + 0.1
     used = rng.random((7, 5)) > 0.3

@@ -76,6 +76,14 @@ def test_recover_writes_the_result_directory(case, tmp_path, capsys):
     # (log with the likelihood's offset: at 64 spp a dark channel of a lit pixel can render as 0)
     lit, e = img.mean(axis=2) > 1e-2 * img.mean(), 1e-3 * img.mean()
     assert np.median(np.abs(np.log(rerender[lit] + e) - np.log(img[lit] + e))) < 0.05
+    # rerender.png is scene.xml as Mitsuba renders it, within a few per cent of the forward model's
+    from mi_dsbrdf.app.io import srgb_bitmap
+    preview = log["rerender_png"]
+    assert preview["renderer"] == "mitsuba" and preview["size"] == [RES, RES] and preview["spp"] >= 4
+    assert preview["mitsuba_vs_rerender"] < 0.03
+    ours = np.array(srgb_bitmap(mi.render(mi.load_file(str(out / "scene.xml")), spp=preview["spp"], seed=0)),
+                    dtype=np.int16)
+    assert np.abs(np.array(mi.Bitmap(str(out / "rerender.png")), dtype=np.int16) - ours).max() <= 1
     # the material loads into the plugin and evaluates
     from mi_dsbrdf import load_material
     found = load_material(str(out / "material.json"))

@@ -148,3 +148,25 @@ def test_a_metal_under_a_real_probe_renders_in_mitsuba_as_recovered(tmp_path, nb
     gap, noise = round_trip(tmp_path, '<bsdf type="merl"><string name="nbrdf" value="%s"/><string name="material" '
                             'value="chrome"/></bsdf>' % nbrdf_file, probe, 64)
     assert noise < 0.015 and gap < 0.04, (noise, gap)
+
+
+def test_the_preview_render_scales_the_film_and_spends_its_ray_budget(tmp_path):
+    """``render_saved_scene``: a film larger than the preview's side is scaled to it, its
+    aspect and its crop kept, relative file names resolve from the scene's folder (and
+    not after it), and the samples per pixel spend the ray budget within their bounds."""
+    from mi_dsbrdf.app.outputs import MAX_SPP, MIN_SPP, render_saved_scene
+    write_exr(tmp_path / "sky.exr", procedural_sky(16, 32))
+    (tmp_path / "scene.xml").write_text(
+        '<scene version="3.0.0"><integrator type="direct"/>'
+        '<sensor type="perspective"><float name="fov" value="30"/>'
+        '<transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>'
+        '<film type="hdrfilm"><integer name="width" value="200"/><integer name="height" value="100"/>'
+        '<integer name="crop_offset_x" value="20"/><integer name="crop_width" value="160"/></film></sensor>'
+        '<shape type="sphere"><bsdf type="dsbrdf"><string name="material" value="gold-metallic-paint"/></bsdf></shape>'
+        '<emitter type="envmap"><string name="filename" value="sky.exr"/></emitter></scene>')
+    img, spp = render_saved_scene(tmp_path / "scene.xml", side=80, samples=80 * 50 * 8)
+    assert img.shape == (50, 80, 3) and spp == 8 and np.isfinite(img).all() and img.max() > 0
+    assert render_saved_scene(tmp_path / "scene.xml", side=80, samples=1)[1] == MIN_SPP
+    assert render_saved_scene(tmp_path / "scene.xml", side=8, samples=1 << 30)[1] == MAX_SPP
+    with pytest.raises(RuntimeError, match="sky.exr"):                  # the folder was only lent
+        mi.load_string((tmp_path / "scene.xml").read_text())

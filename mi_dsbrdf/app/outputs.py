@@ -3,6 +3,8 @@
 * :func:`write_scene_xml` rewrites the input scene with the recovered material
   and light (Mitsuba's own parser and writer, so everything else in the scene
   is kept as the user wrote it);
+* :func:`render_saved_scene` renders the written scene with Mitsuba, as a user
+  will (``rerender.png``);
 * :func:`material_preview` shows a material on spheres under several lights;
 * :func:`illumination_preview` shows a lat-long map with its unseen texels marked.
 """
@@ -98,6 +100,47 @@ def _restore_ids(xml_file) -> None:
                     parent.text = None
     ET.indent(tree, space="    ")
     tree.write(xml_file, encoding="unicode")
+
+
+#: the preview render of the saved scene (:func:`render_saved_scene`): its longest side
+#: at most PREVIEW_SIDE pixels, and about PREVIEW_SAMPLES camera rays in all (about a
+#: second or two on a laptop's CPU), between MIN_SPP and MAX_SPP a pixel
+PREVIEW_SIDE, PREVIEW_SAMPLES, MIN_SPP, MAX_SPP = 1024, 1 << 22, 4, 1024
+#: the film's integer properties scaled with its size
+_FILM_SIZES = ("width", "height", "crop_offset_x", "crop_offset_y", "crop_width", "crop_height")
+
+
+def render_saved_scene(scene_file, side=PREVIEW_SIDE, samples=PREVIEW_SAMPLES) -> tuple:
+    """Mitsuba's render of the scene ``scene_file`` (relative file names from its
+    folder) with its own integrator, its film scaled so that the longest side of
+    its crop is at most ``side`` pixels: ((h, w, 3) float32, spp), the samples per pixel
+    chosen so that the render takes about ``samples`` camera rays (non-finite
+    values are 0)."""
+    config = mi.parser.ParserConfig(mi.variant())
+    kept = mi.FileResolver(mi.file_resolver())
+    resolver = mi.FileResolver(kept)
+    resolver.prepend(os.path.dirname(os.path.abspath(os.fspath(scene_file))))
+    mi.set_file_resolver(resolver)      # as mi.load_file does, for the scene's relative file names
+    try:
+        state = mi.parser.parse_file(config, os.fspath(scene_file))
+        for node in state.nodes:
+            if node.type == mi.ObjectType.Film:
+                props = node.props
+                size = {k: int(props[k]) for k in _FILM_SIZES if k in props.keys()}
+                size.setdefault("width", 768)               # Mitsuba's film defaults
+                size.setdefault("height", 576)
+                longest = max(size.get("crop_width", size["width"]), size.get("crop_height", size["height"]))
+                f = min(1.0, side / longest)
+                for k, v in size.items():
+                    props[k] = max(int(round(v * f)), 0 if k.startswith("crop_offset") else 1)
+        mi.parser.transform_all(config, state)
+        scene = mi.parser.instantiate(config, state)
+    finally:
+        mi.set_file_resolver(kept)
+    crop = scene.sensors()[0].film().crop_size()
+    spp = int(np.clip(samples // max(int(crop[0]) * int(crop[1]), 1), MIN_SPP, MAX_SPP))
+    img = np.array(mi.render(scene, spp=spp, seed=0), dtype=np.float32)
+    return np.where(np.isfinite(img), img, 0.0).astype(np.float32), spp
 
 
 def material_preview(material_file, path, res=96, spp=64) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mi_dsbrdf.app.io import as_mask, check_image, check_out, read_mask
-from mi_dsbrdf.app.result import RESULT_FILES, Result, stage_row
+from mi_dsbrdf.app.result import RESULT_FILES, Result, relative_residual, stage_row
 from mi_dsbrdf.app.memory import check_memory, memory_needs
 from mi_dsbrdf.app.working_grid import (WorkingGrid, rerender as grid_rerender, usable_blocks, working_grid,
                                         working_scene)
@@ -205,18 +205,6 @@ def brightest_place(excess, used) -> str:
     if np.hypot(dx, dy) < 0.2:
         return "centre"
     return COMPASS[int(np.round(np.degrees(np.arctan2(dy, dx)) / 45.0)) % 8]
-
-
-def relative_residual(image, rerender, used, band=256) -> float:
-    """How far the re-render is from the image over the ``used`` pixels (H, W):
-    sum |rerender - image| / sum |image| (relative L1), in bands of rows."""
-    num = den = 0.0
-    for r in range(0, image.shape[0], band):
-        u = used[r:r + band]
-        a, b = image[r:r + band][u], rerender[r:r + band][u]
-        num += float(np.abs(b - a).sum())
-        den += float(np.abs(a).sum())
-    return num / den if den > 0 else float("nan")
 
 
 def recover_files(scene_file, image_file, out, mask_file=None, force=False, config: Config | str = None,

@@ -18,7 +18,11 @@ and ``mi-dsbrdf recover``):
                         (checks, inference, re-render, observed directions, save) time and
                         peak memory, and "flags": one line for each part of the answer the
                         photograph may not support (``Recovery.flags``)
-    input.png, rerender.png, residual.png, material.png (spheres), illumination.png    previews
+    input.png, rerender.png, residual.png, material.png (spheres), illumination.png    previews:
+                        rerender.png is scene.xml as Mitsuba renders it (its longest side at most
+                        1024 pixels; log.json's "rerender_png" says how, and how far it lies from
+                        the forward model's re-render), residual.png the |log| difference between
+                        the forward model's re-render and the image over the pixels inference used
 
 The folder is written whole or not at all (:func:`~mi_dsbrdf.app.io.staged_output`).
 """
@@ -34,7 +38,7 @@ import time
 import numpy as np
 
 from mi_dsbrdf.app.io import save_preview, staged_output, write_exr
-from mi_dsbrdf.app.outputs import illumination_preview, material_preview, write_scene_xml
+from mi_dsbrdf.app.outputs import illumination_preview, material_preview, render_saved_scene, write_scene_xml
 from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.inference.latlong import texel_blocks
 
@@ -137,7 +141,20 @@ class Result:
                             material_file=os.path.join(out, "material.json"))
         material_preview(material_file, os.path.join(tmp, "material.png"))
         save_preview(self.image.astype(np.float32), os.path.join(tmp, "input.png"))
-        save_preview(self.rerender.astype(np.float32), os.path.join(tmp, "rerender.png"))
+        # rerender.png: the written scene.xml as Mitsuba renders it, what a user will get;
+        # without a scene file, or if Mitsuba cannot render it, the forward model's re-render
+        preview = {"renderer": "forward model"}
+        if self.scene_source is not None:
+            try:
+                img, spp = render_saved_scene(os.path.join(tmp, "scene.xml"))
+                preview = {"renderer": "mitsuba", "spp": spp, "size": list(img.shape[:2])}
+                if img.shape == self.image.shape:
+                    preview["mitsuba_vs_rerender"] = relative_residual(self.rerender, img, self.used)
+            except Exception as e:  # noqa: BLE001  (a preview never costs the result)
+                preview["mitsuba_error"] = str(e).splitlines()[-1] if str(e) else type(e).__name__
+        if preview["renderer"] == "forward model":
+            img = self.rerender
+        save_preview(np.asarray(img, np.float32), os.path.join(tmp, "rerender.png"))
         eps = 1e-3 * self.image.mean()
         resid = np.empty(self.image.shape, np.float32)
         for r in range(0, resid.shape[0], 256):            # in bands of rows: a photograph's size in float64 once
@@ -147,5 +164,16 @@ class Result:
         save_preview(resid, os.path.join(tmp, "residual.png"))
         with open(os.path.join(tmp, "log.json"), "w") as f:
             stages = dict(self.log.get("stages", {}), save=stage_row(began))
-            json.dump(dict(self.log, light=light, stages=stages), f, indent=1, default=float)
+            json.dump(dict(self.log, light=light, stages=stages, rerender_png=preview), f, indent=1, default=float)
 
+
+def relative_residual(image, rerender, used, band=256) -> float:
+    """How far the re-render is from the image over the ``used`` pixels (H, W):
+    sum |rerender - image| / sum |image| (relative L1), in bands of rows."""
+    num = den = 0.0
+    for r in range(0, image.shape[0], band):
+        u = used[r:r + band]
+        a, b = image[r:r + band][u], rerender[r:r + band][u]
+        num += float(np.abs(b - a).sum())
+        den += float(np.abs(a).sum())
+    return num / den if den > 0 else float("nan")
