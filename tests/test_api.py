@@ -98,8 +98,8 @@ def test_api_recovers_from_arrays_and_saves_the_result_directory(directional, tm
     r2.save(tmp_path / "from_scene")
     assert not (tmp_path / "from_scene" / "scene.xml").exists() and (tmp_path / "from_scene" / "material.json").exists()
     # ... and its rerender.png is the forward model's; a scene file's is Mitsuba's
-    assert json.loads((tmp_path / "from_scene" / "log.json").read_text())["rerender_png"] == {"renderer": "forward model"}
-    assert json.loads((tmp_path / "result" / "log.json").read_text())["rerender_png"]["renderer"] == "mitsuba"
+    previews = [json.loads((tmp_path / f / "log.json").read_text())["rerender_png"] for f in ("from_scene", "result")]
+    assert previews[0] == {"renderer": "forward model"} and previews[1]["renderer"] == "mitsuba"
     assert out == os.path.abspath(tmp_path / "result")
 
 
