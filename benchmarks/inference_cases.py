@@ -5,6 +5,7 @@
   (``Config.map_pairs``: 4096 of the image's 12.4k usable pixels) and, to show what
   the budget costs in accuracy, on all of them; every method on the app's pixels
   (:func:`mi_dsbrdf.inference.pixels.usable_pixels`: the silhouette ring dropped);
+  beside it, the same without the highlight check (``highlight_texels`` 0), for its cost;
 * principled + envmap by Adam through ``prb``, 150 iterations at 8 spp, on the
   same image (the recipe of Mitsuba's tutorials, :mod:`mi_dsbrdf.evaluation.adam`);
 * a point light: a 128x128 sphere photographed through 8x8 rays a pixel (target <= 5 s),
@@ -105,9 +106,12 @@ def _case(name, queue):
         else:
             if name.endswith("all_pixels"):
                 cfg = dataclasses.replace(cfg, map_pairs=1 << 40)
+            if name.endswith("no_highlight_check"):
+                cfg = dataclasses.replace(cfg, highlight_texels=0)
             res = recover_envmap(ts, img, usable_pixels(ts.mask, img), model, cfg)
             out["seconds"] = time.perf_counter() - t0
             out["rounds"] = len(res.log)
+            out["highlight_change"], out["highlight_texels"] = res.highlight_change, res.highlight_texels
             recovered = res.illumination
             true_material = model.library_material(MATERIAL)
             samples = samples_from_function(lambda th, td, pd: true_material.eval(th, td))
@@ -305,8 +309,9 @@ def main(argv=None):
         return run_sizes(args.sizes, range(1, args.seeds + 1),
                          args.out or os.path.join(ROOT, "benchmarks", "results", "inference_sizes.json"))
     results = {name: run(_case, name) for name in
-               ("envmap_128px_32x64_two_pass", "principled_adam_150it_8spp", "point_light_128px",
-                "point_light_128px_centre_ray", "envmap_128px_32x64_two_pass_all_pixels")}
+               ("envmap_128px_32x64_two_pass", "envmap_128px_32x64_two_pass_no_highlight_check",
+                "principled_adam_150it_8spp", "point_light_128px", "point_light_128px_centre_ray",
+                "envmap_128px_32x64_two_pass_all_pixels")}
     ratio = results["envmap_128px_32x64_two_pass"]["seconds"] / results["principled_adam_150it_8spp"]["seconds"]
     for name, r in results.items():
         target = TARGETS.get(name)
@@ -322,6 +327,11 @@ def main(argv=None):
     print("point light, %d x %d rays a pixel / the centre ray: %.2fx" % (
         rays, rays,
         results["point_light_128px"]["seconds"] / results["point_light_128px_centre_ray"]["seconds"]))
+    print("natural light, with the highlight check / without (highlight_texels 0): %.2fx, peak %+.0f MB" % (
+        results["envmap_128px_32x64_two_pass"]["seconds"]
+        / results["envmap_128px_32x64_two_pass_no_highlight_check"]["seconds"],
+        results["envmap_128px_32x64_two_pass"]["peak_memory_mb"]
+        - results["envmap_128px_32x64_two_pass_no_highlight_check"]["peak_memory_mb"]))
     path = args.out or os.path.join(ROOT, "benchmarks", "results", "inference.json")
     os.makedirs(os.path.dirname(path), exist_ok=True)
     with open(path, "w") as f:

@@ -107,8 +107,8 @@ def test_mitsuba_renders_the_saved_light_as_inference_fitted_it(kind, material, 
 def round_trip(tmp_path, bsdf_xml, envmap, res, config=None):
     """Photograph a sphere of ``bsdf_xml`` under ``envmap`` with Mitsuba, recover it
     (``config``, default settings by default), save, and render the saved scene.xml with Mitsuba:
-    (its relative L1 from the re-render, and the Mitsuba noise: half the relative
-    L1 between two seeds)."""
+    (its relative L1 from the re-render, the Mitsuba noise: half the relative
+    L1 between two seeds, and the result's log)."""
     xml = open(scene_path("sphere_envmap")).read().replace('name="res" value="128"', 'name="res" value="%d"' % res)
     xml = xml.replace('value="textures/sky.exr"', 'value="%s"' % envmap)
     photo = mi.render(mi.load_string(xml.replace('<bsdf type="dsbrdf" id="material"/>', bsdf_xml)), spp=SPP, seed=1)
@@ -121,33 +121,38 @@ def round_trip(tmp_path, bsdf_xml, envmap, res, config=None):
     scene = mi.load_file(os.path.join(saved, "scene.xml"))
     renders = [np.array(mi.render(scene, spp=SPP, seed=s), dtype=np.float64) for s in (7, 8)]
     mitsuba = 0.5 * (renders[0] + renders[1])
-    return relative_l1(mitsuba, result.rerender, result.used), relative_l1(renders[0], renders[1], result.used) / 2
+    return (relative_l1(mitsuba, result.rerender, result.used),
+            relative_l1(renders[0], renders[1], result.used) / 2, result.log)
 
 
 @pytest.mark.slow
 def test_a_sharp_lobe_on_a_small_sphere_renders_in_mitsuba_as_recovered(tmp_path):
     """A 32 px sphere whose lobes have gamma 4700 (about 2.4 degrees wide, narrower
-    than one pixel's reflected directions) under a sky with a 3 degree sun, with the
-    highlight pairs: 4.3 % (2.8 % under the wells probe, 17 % from the pixels' centre
+    than one pixel's reflected directions) under a sky with a 3 degree sun, at the
+    defaults: the highlight check finds the lobe and the last pass goes on with the
+    highlight pairs, 5.3 % (3.0 % under the wells probe; 21 % from the pixels' centre
     rays alone)."""
     base = model_file.shipped_model().library_material("gold-metallic-paint")
     truth = os.path.join(tmp_path, "truth.json")
     Material(base.log_kappa, np.full_like(base.log_gamma, np.log(4700.0)), base.chromaticity).save(truth)
     sky = os.path.join(tmp_path, "sky.exr")
     write_exr(sky, procedural_sky(128, 256))
-    gap, noise = round_trip(tmp_path, '<bsdf type="dsbrdf"><string name="filename" value="%s"/></bsdf>' % truth,
-                            sky, 32)
-    assert noise < 0.015 and gap < 0.05, (noise, gap)
+    gap, noise, log = round_trip(tmp_path, '<bsdf type="dsbrdf"><string name="filename" value="%s"/></bsdf>'
+                                 % truth, sky, 32)
+    assert noise < 0.015 and gap < 0.06, (noise, gap)
+    assert log["highlight_texels"] == 25 and log["highlight_change"] > 0.1
 
 
 @pytest.mark.slow
 def test_a_metal_under_a_real_probe_renders_in_mitsuba_as_recovered(tmp_path, nbrdf_file):
-    """Chrome (MERL, measured) on a 64 px sphere under the grace probe, with the
-    highlight pairs: within 4 % (15 % from the pixels' centre rays alone)."""
+    """Chrome (MERL, measured) on a 64 px sphere under the grace probe, at the defaults
+    (the highlight check goes on with the pairs): within 4 % (15 % from the pixels'
+    centre rays alone)."""
     probe = data_path("envmaps", "probulator", "grace.hdr")
-    gap, noise = round_trip(tmp_path, '<bsdf type="merl"><string name="nbrdf" value="%s"/><string name="material" '
-                            'value="chrome"/></bsdf>' % nbrdf_file, probe, 64)
+    gap, noise, log = round_trip(tmp_path, '<bsdf type="merl"><string name="nbrdf" value="%s"/><string name="material" '
+                                 'value="chrome"/></bsdf>' % nbrdf_file, probe, 64)
     assert noise < 0.015 and gap < 0.04, (noise, gap)
+    assert log["highlight_texels"] == 25, log["highlight_change"]
 
 
 def test_the_preview_render_scales_the_film_and_spends_its_ray_budget(tmp_path):

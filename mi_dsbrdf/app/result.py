@@ -79,7 +79,11 @@ class Result:
         logged round (posterior terms, seconds), "seconds", "residual" (the
         re-render's relative L1 from the image over the used pixels),
         "highlight_doubt" (``Recovery``'s), "flags" (``Recovery.flags``, a doubted
-        highlight with the place on the object it lights), ...}
+        highlight with the place on the object it lights), "highlight_change" and
+        "highlight_texels" (under a map: ``Recovery``'s), ...}; log.json adds
+        "rerender_png": how rerender.png was rendered ({"renderer": "mitsuba", "spp",
+        "size", "mitsuba_vs_rerender" (relative L1 over the used pixels, with
+        Mitsuba's noise)} or {"renderer": "forward model"})
     image : (H, W, 3) float64 observed image (linear); used : (H, W) bool, the
         pixels inference used (an image larger than ``Config.working_pixels``: the
         pixels of the used blocks, :mod:`~mi_dsbrdf.app.working_grid`); rerender :
