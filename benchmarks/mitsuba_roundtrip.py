@@ -35,7 +35,7 @@ Mitsuba's render of the same sphere (box filter, 4096 spp, the map written as
 * at 2 directions per texel side, traced at ``k`` times the resolution and
   averaged over each pixel's k x k block (the pixel's area);
 * at 2 directions per texel side with the highlight pairs of 25 texels a pixel
-  (:mod:`mi_dsbrdf.inference.highlights`, ``--highlight-texels 25``).
+  (:mod:`mi_dsbrdf.inference.highlights`, ``Config.highlight_texels``).
 
 Relative L1 over the sphere without its silhouette ring
 (:func:`~mi_dsbrdf.inference.pixels.interior`), beside Mitsuba's noise, for
