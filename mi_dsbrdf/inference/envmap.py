@@ -165,6 +165,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     # the highlight pairs (Config.highlight_texels, highlight_check): where they change
     # the answer's image, a lobe is sharper than a pixel's footprint and the last pass
     # goes on with them, so that the answer renders as Mitsuba renders it
+    route_end = end[4]                  # the routes' posterior, to compare the other mode with
     last_pass = "colour" if colour else "grey"
     last = posterior(cfg.map_size, last_pass)
     change, used_pairs = None, 0
@@ -186,7 +187,7 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     if loser is not None:
         # the other route's answer: a second mode of the same posterior
         other_material = Material.from_basis(model.basis, loser[0], softmax_chroma(loser[1]), name="other mode")
-        gap = float(loser[4] - end[4])
+        gap = float(loser[4] - route_end)
         posterior_of_material = dataclasses.replace(posterior_of_material, alternatives=(
             (other_material.parameters() - material.parameters(), gap),))
     spread = illumination_spread(last, log_map, last.transport(psi, logits), seen)
