@@ -72,7 +72,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
-from mi_dsbrdf.inference.transport import apply_transport
+from mi_dsbrdf.inference.lobes import LobeSum
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 from mi_dsbrdf.inference.uncertainty import highlight_doubt, illumination_spread, laplace
@@ -170,12 +170,12 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
     last = posterior(cfg.map_size, last_pass)
     change, used_pairs = None, 0
     if cfg.highlight_texels:
-        pairs = posterior(cfg.map_size, last_pass, cfg.highlight_texels)
-        change = highlight_change(last, pairs, *end[:4])
+        change = highlight_change(last, *end[:4], cfg.highlight_texels)
         if change >= cfg.highlight_check:
-            end = alternate(pairs, last_pass, cfg.map_size, *end[:3], cfg,
+            last = posterior(cfg.map_size, last_pass, cfg.highlight_texels)
+            end = alternate(last, last_pass, cfg.map_size, *end[:3], cfg,
                             lambda row: log(dict(row, **{"pass": "highlights", "highlight_change": change})))
-            last, used_pairs = pairs, cfg.highlight_texels
+            used_pairs = cfg.highlight_texels
     psi, logits, log_map, seen, _ = end
     chroma = softmax_chroma(logits)
     # the material's posterior with the map at its MAP, on the last pass's posterior
@@ -199,15 +199,30 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                     other_mode_gap=gap, highlight_change=change, highlight_texels=used_pairs)
 
 
-def highlight_change(plain, pairs, psi, logits, log_map, seen) -> float:
-    """Relative L1 change, over the usable pixels of the posterior ``plain``, of the
+#: pixels a chunk of the highlight check builds the pairs of at once: the check's
+#: memory stays a fraction of the pass with the pairs (which only a sharp lobe needs)
+CHECK_CHUNK = 1024
+
+
+def highlight_change(post, psi, logits, log_map, seen, highlights, chunk=CHECK_CHUNK) -> float:
+    """Relative L1 change, over the usable pixels of the posterior ``post``, of the
     image of the material (psi, logits) under the log map (unseen texels black) when
-    the highlight pairs integrate the texels nearest each mirror direction (``pairs``,
-    the same pixels: :mod:`~mi_dsbrdf.inference.highlights`)."""
+    the highlight pairs of ``highlights`` texels a pixel integrate the texels nearest
+    each mirror direction over the pixel's area and the texel
+    (:mod:`~mi_dsbrdf.inference.highlights`); built ``chunk`` pixels at a time."""
     L = np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3)
-    a = apply_transport(plain.transport(psi, logits), L)[plain.keep]
-    b = apply_transport(pairs.transport(psi, logits), L)[pairs.keep]
-    return float(np.abs(b - a).sum() / max(float(np.abs(b).sum()), 1e-300))
+    material = post.material(psi, logits)
+    view = post.view.texels
+    samples = int(round(view.per_texel ** 0.5))
+    rows = np.nonzero(post.keep)[0]
+    change = total = 0.0
+    for r0 in range(0, rows.size, chunk):
+        sub = view.subset(rows[r0:r0 + chunk])
+        plain = LobeSum(sub).render(material, L)
+        pairs = LobeSum(sub.with_map_size(sub.map_size, samples, highlights)).render(material, L)
+        change += float(np.abs(pairs - plain).sum())
+        total += float(np.abs(pairs).sum())
+    return change / max(total, 1e-300)
 
 
 def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> tuple:
