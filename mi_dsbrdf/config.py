@@ -88,10 +88,10 @@ class Config:
         image changes by ``highlight_check`` or more with them: a lobe narrower than
         one pixel's reflected directions is then fitted and re-rendered as Mitsuba
         renders it.
-    highlight_check : float, default 0.02
+    highlight_check : float, default 0.03
         The relative L1 change of the answer's image under the highlight pairs from which
         the last pass goes on with them (>= 0; 0: always). A recovery that goes on takes
-        about 1.5x its time (5 of 60 validation cases, each under a small sun).
+        about 1.5x its time (3 of 60 validation cases, each under a small sun).
     pixel_rays : int, default 4
         Under a point or directional light, each pixel is the mean of n x n rays across its
         area, as a box-filtered camera pixel (>= 1; 1: its centre ray, several per cent off
@@ -131,7 +131,7 @@ class Config:
     texel_samples: int = 2
     grey_texel_samples: int | None = 1
     highlight_texels: int = 25
-    highlight_check: float = 0.02
+    highlight_check: float = 0.03
     pixel_rays: int = 4
     reflectance_pairs: int = 500_000
     map_pairs: int = 1 << 23
