@@ -177,7 +177,8 @@ def test_envmap_inference_runs_from_the_starts_it_is_given():
 
 
 def test_coarse_to_fine_map_sizes_and_resampling():
-    from mi_dsbrdf.inference.envmap import BLACK, map_sizes, resample
+    from mi_dsbrdf.inference.envmap import BLACK, map_sizes
+    from mi_dsbrdf.inference.latlong import resample
     assert map_sizes((32, 64), 3, 2) == [(8, 16), (32, 64), (32, 64)]
     assert map_sizes((32, 64), 3, 1) == [(8, 16), (32, 64)]
     assert map_sizes((32, 64), 1, 2) == [(32, 64)] * 3

@@ -26,7 +26,7 @@ GMM means), a constant map at the image's level refined by a short grey
 illumination block and a short reflectance block; the lowest posterior starts
 the rounds (:func:`alternate`). The start runs on the map at half its
 resolution (:func:`map_sizes`, ``Config.map_levels``); its map moves up by
-:func:`resample`.
+:func:`~mi_dsbrdf.inference.latlong.resample`.
 Rounds continue until the negative log posterior changes by less than ``tol``
 (relative). Two passes: grey illumination first (one map shared by the
 channels: the grey-world assumption; the lobes keep the image's colour), then
@@ -49,13 +49,11 @@ colour round from the second first moves along that product
 only if the posterior falls.
 
 Highlight pairs (``Config.highlight_texels``, ``highlight_check``; not in the
-paper): the texel sum sees each pixel through its centre ray. The answer's
-image is rendered once more with the texels nearest each pixel's mirror
-direction integrated over the pixel's area and the texel
-(:mod:`~mi_dsbrdf.inference.highlights`); where that changes it by
-``highlight_check`` or more (:func:`highlight_change`), a lobe is sharper than
-a pixel's footprint, and the last pass goes on with the pairs (rows
-``{"pass": "highlights"}``), so that the answer renders as Mitsuba renders it.
+paper): where integrating each pixel's mirror direction over its area changes
+the answer's image by ``highlight_check`` or more
+(:func:`~mi_dsbrdf.inference.lobes.highlight_change`), a lobe is sharper than a
+pixel's footprint, and the last pass goes on with the highlight pairs
+(:mod:`~mi_dsbrdf.inference.highlights`; rows ``{"pass": "highlights"}``).
 """
 from __future__ import annotations
 
@@ -72,14 +70,13 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
-from mi_dsbrdf.inference.lobes import LobeSum
+from mi_dsbrdf.inference.latlong import BLACK, resample
+from mi_dsbrdf.inference.lobes import highlight_change
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
 from mi_dsbrdf.inference.result import Recovery
 from mi_dsbrdf.inference.uncertainty import highlight_doubt, illumination_spread, laplace
 from mi_dsbrdf.model.priors import LOG_CHROMA_BASIS
 
-#: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
-BLACK = -30.0
 #: upper bound of the log radiance of a texel
 LOG_MAX = 30.0
 #: the largest move of the colour split (colour_split) in log chromaticity
@@ -162,15 +159,16 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
         log({**{k: v for k, v in (rows[-1] if won else first_last).items() if k not in ("route", "seconds")},
              "pass": "answer", "answer_route": won})
         end, loser = (end, other)[won], (end, other)[1 - won]
-    # the highlight pairs (Config.highlight_texels, highlight_check): where they change
-    # the answer's image, a lobe is sharper than a pixel's footprint and the last pass
-    # goes on with them, so that the answer renders as Mitsuba renders it
+    # the highlight pairs where they change the answer's image (module doc)
     route_end = end[4]                  # the routes' posterior, to compare the other mode with
     last_pass = "colour" if colour else "grey"
     last = posterior(cfg.map_size, last_pass)
     change, used_pairs = None, 0
     if cfg.highlight_texels:
-        change = highlight_change(last, *end[:4], cfg.highlight_texels)
+        psi, logits, log_map, seen = end[:4]
+        change = highlight_change(last.view.texels, np.nonzero(last.keep)[0], last.material(psi, logits),
+                                  np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3),
+                                  cfg.highlight_texels)
         if change >= cfg.highlight_check:
             last = posterior(cfg.map_size, last_pass, cfg.highlight_texels)
             end = alternate(last, last_pass, cfg.map_size, *end[:3], cfg,
@@ -197,32 +195,6 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                     seen=seen, log=rows, laplace=posterior_of_material, illumination_spread=spread,
                     posterior_seconds=time.perf_counter() - t_posterior, other_mode=other_material,
                     other_mode_gap=gap, highlight_change=change, highlight_texels=used_pairs)
-
-
-#: pixels a chunk of the highlight check builds the pairs of at once: the check's
-#: memory stays a fraction of the pass with the pairs (which only a sharp lobe needs)
-CHECK_CHUNK = 1024
-
-
-def highlight_change(post, psi, logits, log_map, seen, highlights, chunk=CHECK_CHUNK) -> float:
-    """Relative L1 change, over the usable pixels of the posterior ``post``, of the
-    image of the material (psi, logits) under the log map (unseen texels black) when
-    the highlight pairs of ``highlights`` texels a pixel integrate the texels nearest
-    each mirror direction over the pixel's area and the texel
-    (:mod:`~mi_dsbrdf.inference.highlights`); built ``chunk`` pixels at a time."""
-    L = np.where(seen[..., None], np.exp(log_map), 0.0).reshape(-1, 3)
-    material = post.material(psi, logits)
-    view = post.view.texels
-    samples = int(round(view.per_texel ** 0.5))
-    rows = np.nonzero(post.keep)[0]
-    change = total = 0.0
-    for r0 in range(0, rows.size, chunk):
-        sub = view.subset(rows[r0:r0 + chunk])
-        plain = LobeSum(sub).render(material, L)
-        pairs = LobeSum(sub.with_map_size(sub.map_size, samples, highlights)).render(material, L)
-        change += float(np.abs(pairs - plain).sum())
-        total += float(np.abs(pairs).sum())
-    return change / max(total, 1e-300)
 
 
 def route(posterior, model, starts, cfg, log, colour, on_colour, grey_pass) -> tuple:
@@ -398,19 +370,6 @@ def map_sizes(map_size, levels, n_passes) -> list:
     H, W = map_size
     start = (max(H >> (levels - 1), 2), max(W >> (levels - 1), 4))
     return [start] + [(H, W)] * n_passes
-
-
-def resample(log_map, size) -> np.ndarray:
-    """The log map (h, w, 3) on ``size`` (H, W) texels, each new texel taking the
-    value of the old texel its centre falls in; unseen (BLACK) texels take the
-    darkest seen value first, so that a texel seen only at the finer size starts lit."""
-    h, w, _ = log_map.shape
-    H, W = size
-    seen = log_map > BLACK
-    x = np.where(seen, log_map, log_map[seen].min() if seen.any() else 0.0)
-    rows = ((np.arange(H) + 0.5) * h / H).astype(np.int64)
-    cols = ((np.arange(W) + 0.5) * w / W).astype(np.int64)
-    return x[rows][:, cols]
 
 
 def illumination_block(post, log_map, T, seen, bins, grey, iters) -> np.ndarray:

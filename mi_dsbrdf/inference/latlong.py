@@ -88,3 +88,20 @@ def procedural_sky(height=64, width=128, sun_direction=(0.5, 0.7, -0.5), sun_rad
         radiance = sun_to_sky * sky_irr / (sun_omega * max(s[1], 1e-3))
         env[sun] = radiance * np.array([1.0, 0.92, 0.8])
     return env.astype(np.float32)
+
+
+#: log radiance of masked (unseen) texels: black, and below every bin of the entropy prior
+BLACK = -30.0
+
+
+def resample(log_map, size) -> np.ndarray:
+    """The log map (h, w, 3) on ``size`` (H, W) texels, each new texel taking the
+    value of the old texel its centre falls in; unseen (BLACK) texels take the
+    darkest seen value first, so that a texel seen only at the finer size starts lit."""
+    h, w, _ = log_map.shape
+    H, W = size
+    seen = log_map > BLACK
+    x = np.where(seen, log_map, log_map[seen].min() if seen.any() else 0.0)
+    rows = ((np.arange(H) + 0.5) * h / H).astype(np.int64)
+    cols = ((np.arange(W) + 0.5) * w / W).astype(np.int64)
+    return x[rows][:, cols]

@@ -293,3 +293,25 @@ def observed_directions(texels: TexelSum, illumination, rows, chunk=JACOBIAN_CHU
             theta_h = np.arccos(np.clip(np.exp(log_cos), 0.0, 1.0))
             total += cell_sums(theta_h, theta_d, weight.reshape(h.texels.size, -1) * grey[h.texels.reshape(-1), None])
     return DirectionWeights(total)
+
+
+#: pixels a chunk of the highlight check builds the pairs of at once: the check's
+#: memory stays a fraction of a pass with the pairs (which only a sharp lobe needs)
+CHECK_CHUNK = 1024
+
+
+def highlight_change(view: TexelSum, rows, material, illumination, highlights, chunk=CHECK_CHUNK) -> float:
+    """Relative L1 change, over the pixels ``rows`` of the map view ``view``, of the
+    image of ``material`` under ``illumination`` (T, 3) when the highlight pairs of
+    ``highlights`` texels a pixel integrate the texels nearest each mirror direction
+    over the pixel's area and the texel (:mod:`~mi_dsbrdf.inference.highlights`):
+    sum |with - without| / sum |with|, the pairs built ``chunk`` pixels at a time."""
+    samples = int(round(view.per_texel ** 0.5))
+    change = total = 0.0
+    for r0 in range(0, len(rows), chunk):
+        sub = view.subset(rows[r0:r0 + chunk])
+        plain = LobeSum(sub).render(material, illumination)
+        pairs = LobeSum(sub.with_map_size(sub.map_size, samples, highlights)).render(material, illumination)
+        change += float(np.abs(pairs - plain).sum())
+        total += float(np.abs(pairs).sum())
+    return change / max(total, 1e-300)

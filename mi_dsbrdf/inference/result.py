@@ -39,7 +39,7 @@ class Recovery:
     other_mode_gap : its negative log posterior above the answer's (>= 0)
     highlight_change : under a map, the relative change of the answer's image when
         the highlight pairs integrate each pixel's mirror direction over its area
-        (:func:`~mi_dsbrdf.inference.envmap.highlight_change`); None if not checked
+        (:func:`~mi_dsbrdf.inference.lobes.highlight_change`); None if not checked
     highlight_texels : the highlight pairs' texels per pixel the answer was fitted
         with (``Config.highlight_texels`` where ``highlight_change`` reached
         ``Config.highlight_check``, else 0); its re-render needs the same
