@@ -147,17 +147,15 @@ class Result:
         save_preview(self.image.astype(np.float32), os.path.join(tmp, "input.png"))
         # rerender.png: the written scene.xml as Mitsuba renders it, what a user will get;
         # without a scene file, or if Mitsuba cannot render it, the forward model's re-render
-        preview = {"renderer": "forward model"}
+        img, preview = self.rerender, {"renderer": "forward model"}
         if self.scene_source is not None:
             try:
-                img, spp = render_saved_scene(os.path.join(tmp, "scene.xml"))
-                preview = {"renderer": "mitsuba", "spp": spp, "size": list(img.shape[:2])}
-                if img.shape == self.image.shape:
-                    preview["mitsuba_vs_rerender"] = relative_residual(self.rerender, img, self.used)
+                mitsuba, spp = render_saved_scene(os.path.join(tmp, "scene.xml"))
+                img, preview = mitsuba, {"renderer": "mitsuba", "spp": spp, "size": list(mitsuba.shape[:2])}
+                if mitsuba.shape == self.image.shape:
+                    preview["mitsuba_vs_rerender"] = relative_residual(self.rerender, mitsuba, self.used)
             except Exception as e:  # noqa: BLE001  (a preview never costs the result)
                 preview["mitsuba_error"] = str(e).splitlines()[-1] if str(e) else type(e).__name__
-        if preview["renderer"] == "forward model":
-            img = self.rerender
         save_preview(np.asarray(img, np.float32), os.path.join(tmp, "rerender.png"))
         eps = 1e-3 * self.image.mean()
         resid = np.empty(self.image.shape, np.float32)
