@@ -88,10 +88,12 @@ def blocked_scene(light, material=None, res=40, blocker=True):
 def test_other_shapes_need_visibility_rays_and_are_named():
     convex_alone = decide(mi.load_dict(blocked_scene("point", blocker=False)), colour_image())
     assert not convex_alone.visibility and "no other shape" in convex_alone.reasons[2]
+    assert not any("reflected by the other shapes" in r for r in convex_alone.reasons)
     for light in ("point", "directional"):
         needs = decide(mi.load_dict(blocked_scene(light)), colour_image())
         assert needs.visibility and needs.light == light
         assert needs.reasons[2].startswith("visibility rays: yes") and "card (rectangle)" in needs.reasons[2]
+        assert needs.reasons[3].startswith("light reflected by the other shapes onto the object: not modelled")
     # several are counted and named, a shape without an id by its kind
     d = {"type": "scene", "object": {"type": "sphere", "bsdf": {"type": "dsbrdf"}},
          "light": {"type": "point", "position": [0, 0, 3]}, "disk": {"type": "disk"}, "more": {"type": "cube"}}

@@ -51,7 +51,7 @@ def resolve_config(config) -> Config:
 
 
 def recover(scene, image, mask=None, config: Config | str = None, progress=None, srgb=False,
-            white_level=None) -> Result:
+            white_level=None, model=None) -> Result:
     """Recover the reflectance and the light of one image of known geometry.
 
     Parameters
@@ -74,6 +74,8 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
         number, or one per channel (R, G, B); pixels with a channel at or above it
         are left out as clipped. Without it, clipping is found as plateaus of each
         channel's maximum (:mod:`mi_dsbrdf.inference.pixels`)
+    model : the reflectance model (:class:`~mi_dsbrdf.model.model_file.ReflectanceModel`, e.g.
+        one built from a library of your own); default the shipped one
 
     Returns
     -------
@@ -95,7 +97,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     h, w = obs.shape[:2]
     if (w, h) != (int(film[0]), int(film[1])):
         raise InputError("%s is %dx%d but the scene's film is %dx%d" % (_name(image), w, h, film[0], film[1]))
-    model = shipped_model()
+    model = shipped_model() if model is None else model
     obj = dsbrdf_object(scene)
     # a film of more than cfg.working_pixels pixels: inference on its block means
     # (mi_dsbrdf.app.working_grid); else on the image itself

@@ -9,6 +9,8 @@ Given the loaded Mitsuba scene, the observed image and its mask, decide:
   shape) alone in the scene, whose surface never shadows itself; otherwise shadow
   rays through the whole scene, so that a non-convex object shadows itself and
   every other shape shadows it;
+* the light other shapes reflect onto the object: not modelled (the log says so
+  when there are other shapes; the README gives what leaving it out costs);
 * the lobes and bases of the reflectance model.
 
 Each decision comes with its reason, printed in the inference log. Errors on
@@ -141,5 +143,7 @@ def decide(scene, image, mask=None, n_lobes=3, n_bases=10, visibility=None) -> S
     reasons.append("colour pass: %s" % ("no (the image is grey)" if grey else "yes (the image has colour)"))
     trace, why = needs_visibility(scene, obj, light) if visibility is None else visibility
     reasons.append("visibility rays: %s (%s)" % ("yes" if trace else "no", why))
+    if other_shapes(scene, obj):
+        reasons.append("light reflected by the other shapes onto the object: not modelled (they only shadow it)")
     reasons.append("reflectance: %d lobes, %d bases" % (n_lobes, n_bases))
     return SceneNeeds(light, not grey, trace, n_lobes, n_bases, tuple(reasons))

@@ -1,0 +1,358 @@
+"""Scenes as photographed: path-traced photographs of an object standing on a ground
+plane, recovered from the scene as a user gives it, beside the same object alone.
+
+Each map case is a held-out MERL material (its measured data through Mitsuba's
+``merl`` plugin; recovered with its leave-one-out model,
+:func:`~mi_dsbrdf.model.build.loo_model`) on an object standing on a diffuse grey
+ground plane under a light probe at full resolution:
+
+* the object: the sphere, or the shipped non-convex torus (tilted, so that it
+  shows much of its sphere of normals and shadows itself);
+* the photograph: Mitsuba's ``path`` integrator (max depth :data:`MAX_DEPTH`, so
+  that the ground's light reaches the object and the torus lights itself), a
+  perspective camera looking down at :data:`RES` px, box filter, :data:`PHOTO_SPP`
+  spp; then shot noise (:data:`PHOTONS` photons at the object's mean pixel,
+  :func:`~mi_dsbrdf.evaluation.experiment.shot_noise`) and every channel clipped
+  at a white level (:data:`WHITE_QUANTILE` of the object's pixels' brightest
+  channel), which the tool is not told;
+* the scene given to :func:`mi_dsbrdf.recover`: the same camera, the object with a
+  ``dsbrdf``, the ground with its diffuse BSDF, an envmap; the default preset.
+
+Its *clean* twin: the same object alone under the same probe, rendered by the
+``direct`` integrator (the single bounce the tool models), no noise, no clipping,
+recovered alike. Scores, for both:
+
+* ``brdf_eq20_paper``, ``brdf_eq20_cosine``: Eq. 20 on the MERL grid in the paper's
+  convention, log(f + 1e-6), and the graphics-fitting one, log(1 + f cos theta_i);
+* ``map_paper``, ``map_cosine``: the recovered map's scale-invariant log error
+  against the probe at its resolution, on the texels it saw; beside a constant map;
+* ``relit``: the recovered material on a lone sphere (64 px) under two probes
+  other than the case's, rendered by Mitsuba (``direct``, :data:`RELIT_SPP` spp)
+  against the measured material rendered alike (scale-invariant log error,
+  cosine convention, the sphere without its silhouette ring);
+* ``seconds``: the recovery's wall time;
+* doing nothing: the leave-one-out model's mean material (BRDF, relit) and a
+  constant map, on the same case.
+
+The point case: a sphere on the ground beside a small blocker that shadows part of
+it, under a point light, photographed and recovered alike (``direction_error_deg``
+against the true direction from the sphere's centre), beside its clean twin (the
+sphere alone).
+
+Sets: ``--set validation`` (the validation materials and probes) or ``report``;
+case i is material i under probe i mod (number of probes), on each object;
+``--limit`` the first N materials. Needs ../shared/data. One process, the cases in
+turn; a case's result is kept under out/scenes_photographed/<set>/ and reused
+(``--fresh`` reruns). Prints the table and writes
+benchmarks/results/scenes_photographed_<set>.json. With ``--photo direct`` the
+photographs are rendered by the ``direct`` integrator: the ground shadows the
+object but does not light it, which the tool does not model either; the
+difference to the ``path`` run is what leaving that light out costs
+(``..._<set>_direct.json``).
+
+    .venv/bin/python benchmarks/scenes_photographed.py --set validation --limit 4   # ~15 min
+    .venv/bin/python benchmarks/scenes_photographed.py --set report                  # ~60 min
+"""
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+from mi_dsbrdf.evaluation.benchmark_cases import (CACHE, DATA, OUT, REPORT_MATERIALS, REPORT_PROBES, RESULTS,
+                                                  VALIDATION_MATERIALS, VALIDATION_PROBES, have_data)
+
+#: the photograph: image side (px), path depth, samples per pixel, photons at the
+#: object's mean pixel, and the quantile of the object's pixels the camera clips at
+RES, MAX_DEPTH, PHOTO_SPP, PHOTONS, WHITE_QUANTILE = 256, 5, 256, 2000, 0.99
+#: the torus turned about x (degrees) to stand 60 degrees from flat, facing the camera;
+#: the ground's height under each object (it stands on it) and its albedo
+TORUS_TILT = -30.0
+GROUND_Y, GROUND_ALBEDO = {"sphere": -1.0, "torus": -0.906}, (0.35, 0.33, 0.30)
+#: the relit sphere: image side, samples per pixel, probes (the first two that differ
+#: from the case's)
+RELIT_RES, RELIT_SPP = 64, 512
+RELIT_PROBES = ["probulator/pisa.hdr", "probulator/uffizi.hdr", "probulator/ennis.hdr"]
+#: the point case: light angle from the camera (degrees) and distance; the blocker's
+#: centre (a fraction of the way to the light, then sideways) and radius
+POINT_ANGLE, POINT_DISTANCE = 45.0, 4.0
+BLOCKER_ALONG, BLOCKER_SIDE, BLOCKER_RADIUS = 0.5, 0.55, 0.25
+OBJECTS = ("sphere", "torus")
+
+
+def camera(res):
+    import mitsuba as mi
+    return {"type": "perspective", "fov": 40.0,
+            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 1.2, 4], target=[0, 0, 0], up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}}
+
+
+def scene_dict(obj, bsdf, light, integrator, ground=True, blocker=None, res=RES) -> dict:
+    """A Mitsuba scene dict: ``obj`` carrying ``bsdf`` under ``light`` (an emitter
+    dict), on the ground unless ``ground`` is False, with a diffuse sphere at
+    ``blocker`` (centre) if given."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.inference.scene_dicts import shape_dict
+    d = {"type": "scene", "integrator": integrator, "sensor": camera(res), "object": shape_dict(obj, bsdf),
+         "light": light}
+    if obj == "torus":
+        d["object"]["to_world"] = mi.ScalarTransform4f().rotate([1, 0, 0], TORUS_TILT)
+    grey = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(GROUND_ALBEDO)}}
+    if ground:
+        d["ground"] = {"type": "rectangle", "bsdf": grey,
+                       "to_world": mi.ScalarTransform4f().translate([0, GROUND_Y[obj], 0]).scale(6)
+                       .rotate([1, 0, 0], -90)}
+    if blocker is not None:
+        d["blocker"] = {"type": "sphere", "center": [float(v) for v in blocker], "radius": BLOCKER_RADIUS,
+                        "bsdf": grey}
+    return d
+
+
+def photograph(scene, seed, clean) -> tuple:
+    """(the photograph, (H, W) bool: the object's pixels): ``scene`` rendered; unless
+    ``clean``, with shot noise and clipped at the white level."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.evaluation.experiment import shot_noise
+    from mi_dsbrdf.inference.rays import centre_hits
+    s = mi.load_dict(scene)
+    img = np.array(mi.render(s, spp=PHOTO_SPP, seed=1), dtype=np.float64)
+    obj = [sh for sh in s.shapes() if sh.id() == "object"][0]
+    _, hit = centre_hits(s, s.sensors()[0], obj)
+    mask = hit.reshape(img.shape[:2])
+    if not clean:
+        img = shot_noise(img, mask, PHOTONS, seed)
+        white = float(np.quantile(img[mask].max(axis=1), WHITE_QUANTILE))
+        img = np.minimum(img, white)
+    return img, mask
+
+
+def relit(material, truth_bsdf, probe, data) -> float:
+    """Mean over the relighting probes of the relit error (module doc)."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.evaluation.experiment import dsbrdf_bsdf
+    from mi_dsbrdf.evaluation.metrics import scale_invariant_log_error
+    from mi_dsbrdf.inference.pixels import interior
+    from mi_dsbrdf.inference.rays import centre_hits
+    from mi_dsbrdf.inference.scene_dicts import camera as front_camera, shape_dict
+    errors = []
+    for p in [p for p in RELIT_PROBES if p != probe][:2]:
+        light = {"type": "envmap", "filename": os.path.join(data, "envmaps", p)}
+        images = []
+        for bsdf in (truth_bsdf, dsbrdf_bsdf(material)):
+            s = mi.load_dict({"type": "scene", "integrator": {"type": "direct", "hide_emitters": True},
+                              "sensor": front_camera(RELIT_RES), "object": shape_dict("sphere", bsdf),
+                              "light": light})
+            images.append(np.array(mi.render(s, spp=RELIT_SPP, seed=3), dtype=np.float64))
+        _, hit = centre_hits(s, s.sensors()[0], s.shapes()[0])
+        errors.append(scale_invariant_log_error(images[1], images[0], interior(hit.reshape(RELIT_RES, RELIT_RES))))
+    return float(np.mean(errors))
+
+
+def recover_case(scene, image, model) -> tuple:
+    import mi_dsbrdf
+    t0 = time.perf_counter()
+    result = mi_dsbrdf.recover(scene, image, model=model)
+    return result, time.perf_counter() - t0
+
+
+def brdf_scores(material, samples) -> dict:
+    from mi_dsbrdf.evaluation.metrics import CONVENTIONS, log_rmse_scale_invariant
+    values = material.eval(samples.theta_h, samples.theta_d)
+    return {"brdf_eq20_" + c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
+            for c in CONVENTIONS}
+
+
+def map_scores(recovered, seen, truth) -> dict:
+    from mi_dsbrdf.evaluation.metrics import scale_invariant_log_error
+    return {"map_paper": scale_invariant_log_error(recovered, truth, seen, "paper"),
+            "map_cosine": scale_invariant_log_error(recovered, truth, seen, "cosine")}
+
+
+def map_case(material, probe, obj, photo, data, clean=None) -> dict:
+    """One map case and its clean twin, scored (module doc); ``photo``: the
+    photograph's integrator (``path`` or ``direct``); ``clean``: the clean twin's
+    scores when they are known (they do not depend on ``photo``)."""
+    from mi_dsbrdf.brdf.measured import MeasuredBRDF
+    from mi_dsbrdf.evaluation.experiment import downsample
+    from mi_dsbrdf.inference.images import read_image
+    from mi_dsbrdf.model.build import loo_model
+    from mi_dsbrdf.model.samples import samples_from_table
+    nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
+    truth_bsdf = {"type": "merl", "nbrdf": nbrdf, "material": material}
+    light = {"type": "envmap", "filename": os.path.join(data, "envmaps", probe)}
+    model = loo_model(material, CACHE)
+    samples = samples_from_table(MeasuredBRDF.from_nbrdf(nbrdf, material))
+    probe_map = read_image(os.path.join(data, "envmaps", probe))
+    name = "%s-%s-%s" % (material, os.path.splitext(os.path.basename(probe))[0], obj)
+    out = {"case": name, "material": material, "probe": probe, "object": obj}
+    if clean is not None:
+        out["clean"] = clean
+    for kind, ground, integrator in (("scene", True, photo_integrator(photo)), ("clean", False, {"type": "direct"})):
+        if kind in out:
+            continue
+        img, _ = photograph(scene_dict(obj, truth_bsdf, light, integrator, ground), name, kind == "clean")
+        result, seconds = recover_case(scene_dict(obj, {"type": "dsbrdf"}, light, {"type": "direct"}, ground),
+                                       img.astype(np.float32), model)
+        rec = result.illumination
+        truth = downsample(probe_map, *rec.shape[:2])
+        row = {"seconds": seconds, "relit": relit(result.material, truth_bsdf, probe, data),
+               "needs": result.log["needs"], "residual": result.log["residual"]}
+        row.update(brdf_scores(result.material, samples))
+        row.update(map_scores(rec, result.seen, truth))
+        out[kind] = row
+        if kind == "scene":
+            nothing = {"relit": relit(model.mean_material(), truth_bsdf, probe, data)}
+            nothing.update(brdf_scores(model.mean_material(), samples))
+            nothing.update(map_scores(np.ones_like(truth), result.seen, truth))
+            out["nothing"] = nothing
+    return out
+
+
+def photo_integrator(photo) -> dict:
+    return {"type": "path", "max_depth": MAX_DEPTH} if photo == "path" else {"type": "direct"}
+
+
+def point_case(material, photo, data, clean=None) -> dict:
+    """The point light with a blocker, and its clean twin (module doc; ``clean`` as
+    :func:`map_case`'s)."""
+    from mi_dsbrdf.evaluation.experiment import light_at
+    from mi_dsbrdf.evaluation.metrics import direction_error_deg
+    from mi_dsbrdf.model.build import loo_model
+    nbrdf = os.path.join(data, "merl", "merl_nbrdf_weights.npz")
+    truth_bsdf = {"type": "merl", "nbrdf": nbrdf, "material": material}
+    d = light_at(POINT_ANGLE)
+    # the camera looks down from +y: light_at's viewer is +z, so tilt it up as the camera is
+    side = np.cross(d, [0.0, 1.0, 0.0])
+    blocker = (1.0 + BLOCKER_ALONG * (POINT_DISTANCE - 1.0)) * d + BLOCKER_SIDE * side / np.linalg.norm(side)
+    light = {"type": "point", "position": [float(v) for v in POINT_DISTANCE * d], "intensity":
+             {"type": "rgb", "value": [40.0, 40.0, 40.0]}}
+    model = loo_model(material, CACHE)
+    name = "%s-point%g-blocker" % (material, POINT_ANGLE)
+    out = {"case": name, "material": material, "object": "sphere"}
+    if clean is not None:
+        out["clean"] = clean
+    for kind, ground, integrator in (("scene", True, photo_integrator(photo)), ("clean", False, {"type": "direct"})):
+        if kind in out:
+            continue
+        stop = blocker if kind == "scene" else None
+        img, mask = photograph(scene_dict("sphere", truth_bsdf, light, integrator, ground, stop), name,
+                               kind == "clean")
+        result, seconds = recover_case(scene_dict("sphere", {"type": "dsbrdf"}, light, {"type": "direct"}, ground,
+                                                  stop), img.astype(np.float32), model)
+        out[kind] = {"seconds": seconds, "direction_error_deg": direction_error_deg(result.light["direction"], d),
+                     "needs": result.log["needs"], "residual": result.log["residual"]}
+        if kind == "scene":
+            lit = img[mask].max(axis=1)
+            out["scene"]["shadowed_fraction"] = float(np.mean(lit < 0.05 * np.quantile(lit, 0.9)))
+    return out
+
+
+def cases(which, limit):
+    materials, probes = ((VALIDATION_MATERIALS, VALIDATION_PROBES) if which == "validation"
+                         else (REPORT_MATERIALS, REPORT_PROBES))
+    materials = materials[:limit] if limit else materials
+    return [(m, probes[i % len(probes)], o) for i, m in enumerate(materials) for o in OBJECTS]
+
+
+MEASURES = ("brdf_eq20_paper", "brdf_eq20_cosine", "map_paper", "map_cosine", "relit")
+
+
+def summarise(rows, point, command) -> dict:
+    """Medians, ratios and counts of the map cases (the issue's targets), and the point case."""
+    def med(kind, key):
+        return float(np.median([r[kind][key] for r in rows]))
+    out = {"command": command, "cases": len(rows), "median": {}, "better_than_nothing": {}}
+    for kind in ("scene", "clean", "nothing"):
+        out["median"][kind] = {k: med(kind, k) for k in MEASURES}
+    for k in MEASURES:
+        out["better_than_nothing"][k] = int(sum(r["scene"][k] < r["nothing"][k] for r in rows))
+    out["relit_scene_over_clean"] = float(np.median([r["scene"]["relit"] / r["clean"]["relit"] for r in rows]))
+    out["time_scene_over_clean"] = float(np.median([r["scene"]["seconds"] / r["clean"]["seconds"] for r in rows]))
+    out["seconds"] = {"scene": med("scene", "seconds"), "clean": med("clean", "seconds")}
+    out["point"] = point
+    out["rows"] = [{"case": r["case"], **{"%s_%s" % (kind, k): round(r[kind][k], 4)
+                                          for kind in ("scene", "clean", "nothing") for k in MEASURES},
+                    "scene_seconds": round(r["scene"]["seconds"], 1),
+                    "clean_seconds": round(r["clean"]["seconds"], 1)} for r in rows]
+    return out
+
+
+def table(s) -> str:
+    n = s["cases"]
+    lines = ["%d map cases: median (scene as photographed | clean twin | doing nothing), "
+             "and how many of the scene's beat doing nothing" % n,
+             "%-18s %8s %8s %8s   %s" % ("measure", "scene", "clean", "nothing", "scene better")]
+    for k in MEASURES:
+        lines.append("%-18s %8.3f %8.3f %8.3f   %d of %d" % (
+            k, s["median"]["scene"][k], s["median"]["clean"][k], s["median"]["nothing"][k],
+            s["better_than_nothing"][k], n))
+    lines.append("relit, scene over clean twin (median of ratios): %.2f (target <= 1.25)"
+                 % s["relit_scene_over_clean"])
+    lines.append("time, scene over clean twin (median of ratios): %.2f (target <= 1.5); median %.1f s against %.1f s"
+                 % (s["time_scene_over_clean"], s["seconds"]["scene"], s["seconds"]["clean"]))
+    p = s.get("point")
+    if p:
+        lines.append("point light with a blocker (%s): %.2f deg off (target <= 2; clean twin %.2f deg), "
+                     "%.0f %% of the sphere's pixels in shadow, %.1f s against %.1f s" % (
+                         p["case"], p["scene"]["direction_error_deg"], p["clean"]["direction_error_deg"],
+                         100 * p["scene"]["shadowed_fraction"], p["scene"]["seconds"], p["clean"]["seconds"]))
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--set", choices=("validation", "report"), default="validation")
+    ap.add_argument("--limit", type=int, default=0, help="the first N materials (0: all)")
+    ap.add_argument("--fresh", action="store_true", help="rerun cases whose results are kept")
+    ap.add_argument("--photo", choices=("path", "direct"), default="path",
+                    help="the photographs' integrator: path (the ground lights the object) or direct (it only "
+                         "shadows it: what ignoring its light costs is the difference)")
+    ap.add_argument("--data", default=DATA)
+    args = ap.parse_args(argv)
+    if not have_data(args.data):
+        sys.exit("needs ../shared/data (MERL fits and light probes)")
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_rgb")
+    tag = args.set + ("" if args.photo == "path" else "_direct")
+    folder = os.path.join(OUT, "scenes_photographed", tag)
+    os.makedirs(folder, exist_ok=True)
+
+    def run(name, fn, *a):
+        path = os.path.join(folder, name + ".json")
+        if os.path.exists(path) and not args.fresh:
+            with open(path) as f:
+                return json.load(f)
+        t0 = time.perf_counter()
+        twin = os.path.join(OUT, "scenes_photographed", args.set, name + ".json")     # the path run's
+        clean = None
+        if args.photo != "path" and os.path.exists(twin):
+            with open(twin) as f:
+                clean = json.load(f)["clean"]
+        r = fn(*a, args.photo, args.data, clean)
+        with open(path, "w") as f:
+            json.dump(r, f, indent=1)
+        print("%-48s %.0f s: relit scene %s clean %s" % (
+            name, time.perf_counter() - t0, *(("%.3f" % r[k]["relit"]) if "relit" in r[k] else
+                                             ("%.2f deg" % r[k]["direction_error_deg"]) for k in ("scene", "clean"))),
+              flush=True)
+        return r
+    rows = [run("%s-%s-%s" % (m, os.path.splitext(os.path.basename(p))[0], o), map_case, m, p, o)
+            for m, p, o in cases(args.set, args.limit)]
+    materials = VALIDATION_MATERIALS if args.set == "validation" else REPORT_MATERIALS
+    point = run("%s-point-blocker" % materials[0], point_case, materials[0])
+    command = "python benchmarks/scenes_photographed.py --set %s%s%s" % (
+        args.set, " --limit %d" % args.limit if args.limit else "", "" if args.photo == "path" else " --photo direct")
+    s = summarise(rows, point, command)
+    print(table(s))
+    os.makedirs(RESULTS, exist_ok=True)
+    with open(os.path.join(RESULTS, "scenes_photographed_%s.json" % tag), "w") as f:
+        json.dump(s, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
