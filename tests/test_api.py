@@ -121,6 +121,21 @@ def test_api_bad_arguments_are_clear_errors(directional):
         mi_dsbrdf.recover(str(d / "scene.xml"), img[:16])
 
 
+def test_a_model_of_ones_own_is_the_one_inference_uses(directional):
+    """recover(model=...) fits in that model's basis (here its first 4 of 10 bases)."""
+    from mi_dsbrdf.model.model_file import ReflectanceModel, shipped_model
+    d, img = directional
+    arrays = dict(shipped_model().arrays)
+    k = 4
+    arrays.update(bases=arrays["bases"][:k], library_psi=arrays["library_psi"][:, :k],
+                  prior_psi=arrays["prior_psi"][:, :k], gmm_means=arrays["gmm_means"][:, :k],
+                  gmm_covariances=arrays["gmm_covariances"][:, :k, :k])
+    cfg = mi_dsbrdf.Config(max_rounds=1, block_iters=5)
+    r = mi_dsbrdf.recover(str(d / "scene.xml"), img, config=cfg, model=ReflectanceModel(arrays))
+    assert r.material.psi.shape == (k,) and any("%d bases" % k in n for n in r.log["needs"])
+    assert mi_dsbrdf.recover(str(d / "scene.xml"), img, config=cfg).material.psi.shape == (10,)
+
+
 # --- 2. the photograph workflow ---------------------------------------------------
 
 def test_sphere_outline_fit_and_scene_geometry(photo):
