@@ -12,6 +12,7 @@ import numpy as np
 from mi_dsbrdf.app.working_grid import WorkingGrid
 from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import ConfigError
+from mi_dsbrdf.inference.bounce import DIRECTIONS as BOUNCE_DIRECTIONS
 from mi_dsbrdf.inference.envmap import map_sizes
 from mi_dsbrdf.inference.highlights import PIXEL_SIDE, TEXEL_SIDE
 from mi_dsbrdf.inference.objective import MAX_REFLECTANCE_PIXELS, MIN_REFLECTANCE_PIXELS
@@ -65,14 +66,22 @@ BASE_BYTES = 300 * float(1 << 20)
 JACOBIAN_LANES = 1 << 22
 
 
-def memory_estimate(cfg: Config, grid: WorkingGrid, envmap=True, visibility=False) -> dict:
+#: bytes per pixel-direction pair and surface whose light onto the object is modelled
+#: (:mod:`~mi_dsbrdf.inference.bounce`): the pairs it blocks (a bool) and their weights
+#: (float32) in a map's view; a light's views hold a map of
+#: :data:`~mi_dsbrdf.inference.bounce.DIRECTIONS` for them, its geometry per pair
+BOUNCE_PAIR_BYTES = 5.0
+
+
+def memory_estimate(cfg: Config, grid: WorkingGrid, envmap=True, visibility=False, surfaces=0) -> dict:
     """Estimated peak memory (bytes) of :func:`mi_dsbrdf.recover` on ``grid`` under
     ``cfg``: {"total", "views" (the posteriors' pairs, Jacobians and transports),
     "visibility", "directions", "image", "base"}. The working grid's pixels stand for
     the object's (an upper bound); ``envmap``: under an illumination map (else one
     light: one direction a pixel); ``visibility``: shadow rays (a bool per object
-    pixel and direction of each view). The constants were fitted to measurements (see
-    the comment above them)."""
+    pixel and direction of each view); ``surfaces``: other shapes whose light onto the
+    object is modelled. The constants were fitted to measurements (see the comment
+    above them)."""
     h, w = grid.working
     pixels = h * w
     views = vis = directions = 0.0
@@ -89,7 +98,7 @@ def memory_estimate(cfg: Config, grid: WorkingGrid, envmap=True, visibility=Fals
             views += PAIR_BYTES * (post + refl) * d
             lanes = max(lanes, min(refl, max(1, JACOBIAN_LANES // d)) * t)
             directions += DIRECTION_BYTES * d
-            vis += (pixels + post) * d if visibility else 0
+            vis += (pixels + post) * d * (1 + BOUNCE_PAIR_BYTES * surfaces) if visibility else 0
         views += JACOBIAN_BYTES * lanes + TRANSPORT_BYTES * post * T
         # the colour view's highlight pairs: their lanes' geometry, as a pair's
         refl = min(post, int(np.clip(cfg.reflectance_pairs // T, MIN_REFLECTANCE_PIXELS, MAX_REFLECTANCE_PIXELS)))
@@ -99,6 +108,9 @@ def memory_estimate(cfg: Config, grid: WorkingGrid, envmap=True, visibility=Fals
         views = ((PAIR_BYTES + RAY_BYTES) * rays + TRANSPORT_BYTES * pixels
                  + JACOBIAN_BYTES * min(pixels, MAX_REFLECTANCE_PIXELS))
         vis = 2 * rays if visibility else 0
+        if visibility and surfaces:
+            bounce_pairs = pixels * BOUNCE_DIRECTIONS[0] * BOUNCE_DIRECTIONS[1]
+            vis += (PAIR_BYTES + 1 + BOUNCE_PAIR_BYTES * surfaces) * bounce_pairs
     H, W = grid.image
     parts = {"views": views, "visibility": float(vis), "directions": directions,
              "image": IMAGE_PIXEL_BYTES * H * W, "base": BASE_BYTES}
@@ -122,11 +134,11 @@ def available_memory() -> float:
         return math.inf
 
 
-def check_memory(cfg: Config, grid: WorkingGrid, envmap=True, visibility=False, available=None) -> dict:
+def check_memory(cfg: Config, grid: WorkingGrid, envmap=True, visibility=False, available=None, surfaces=0) -> dict:
     """:func:`memory_estimate`, or a one-line ConfigError when it is over
     ``cfg.max_memory`` (GB) or the memory available (``available`` bytes, default
     :func:`available_memory`) that names the setting that lowers it most."""
-    est = memory_estimate(cfg, grid, envmap, visibility)
+    est = memory_estimate(cfg, grid, envmap, visibility, surfaces)
     if cfg.max_memory is not None:
         limit, what = cfg.max_memory * GB, "--max-memory %g GB" % cfg.max_memory
     else:
@@ -144,7 +156,7 @@ def check_memory(cfg: Config, grid: WorkingGrid, envmap=True, visibility=False, 
     gains = {}
     for name, c in lower.items():
         g = grid if name != "--working-pixels" else WorkingGrid.of(grid.image[::-1], c.working_pixels)
-        gains[name] = est["total"] - memory_estimate(c, g, envmap, visibility)["total"]
+        gains[name] = est["total"] - memory_estimate(c, g, envmap, visibility, surfaces)["total"]
     best = max(gains, key=gains.get)
     if gains[best] <= 0.01 * est["total"] or est["image"] > limit:
         hint = "the %dx%d image alone needs %.1f GB: give a smaller image" % (grid.image[1], grid.image[0],

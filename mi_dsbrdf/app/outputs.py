@@ -22,7 +22,12 @@ from mi_dsbrdf.brdf.dsbrdf import Material
 from mi_dsbrdf.inference.latlong import procedural_sky
 
 
-def write_scene_xml(source, out_file, light, material_file) -> None:
+#: the integrator a saved scene gets when other surfaces' light onto the object was
+#: fitted: Mitsuba's path tracer to the depth of one bounce off them
+BOUNCE_INTEGRATOR = {"type": "path", "max_depth": 3}
+
+
+def write_scene_xml(source, out_file, light, material_file, bounce=False) -> None:
     """Write ``out_file``: the scene ``source`` (an XML path or a scene dict) with
     its ``dsbrdf`` object reading ``material_file`` and its light replaced by
     ``light``: {"type": "envmap", "filename"} | {"type": "directional",
@@ -31,7 +36,10 @@ def write_scene_xml(source, out_file, light, material_file) -> None:
     to the folder of ``material_file`` (the result's folder); relative file names
     of the input scene (meshes, textures) are made absolute so that the new scene
     loads from its own folder. Objects keep their ids (a dict's: the keys of the
-    scene's own entries), so that ``relight --shape-id`` finds them."""
+    scene's own entries), so that ``relight --shape-id`` finds them. With
+    ``bounce`` (the light other surfaces reflect onto the object was fitted) the
+    scene's integrator becomes :data:`BOUNCE_INTEGRATOR`, so that Mitsuba renders
+    that light as the fit did."""
     config = mi.parser.ParserConfig(mi.variant())
     if isinstance(source, dict):
         base, state = os.getcwd(), mi.parser.parse_dict(config, source)
@@ -61,6 +69,11 @@ def write_scene_xml(source, out_file, light, material_file) -> None:
             else:
                 props["position"] = mi.ScalarPoint3f(*(float(v) for v in light["position"]))
                 props["intensity"] = mi.ScalarColor3f(*([float(light["intensity"])] * 3))
+        elif node.type == mi.ObjectType.Integrator and bounce:
+            for key in list(props.keys()):
+                del props[key]
+            props.set_plugin_name(BOUNCE_INTEGRATOR["type"])
+            props["max_depth"] = BOUNCE_INTEGRATOR["max_depth"]
         elif "filename" in props.keys():
             name = props["filename"]
             if not os.path.isabs(name) and os.path.exists(os.path.join(base, name)):

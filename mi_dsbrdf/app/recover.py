@@ -28,7 +28,7 @@ from mi_dsbrdf.inference.light import SEARCH_CANDIDATES, recover_light
 from mi_dsbrdf.inference.lobes import observed_directions
 from mi_dsbrdf.inference.pixels import white_levels
 from mi_dsbrdf.inference.reflectance import reflectance_starts
-from mi_dsbrdf.inference.scene_needs import decide, dsbrdf_object
+from mi_dsbrdf.inference.scene_needs import bounce_surfaces, decide, dsbrdf_object
 from mi_dsbrdf.model.model_file import shipped_model
 
 #: fewest usable pixels inference accepts: 16 reflectance unknowns and up to 3 of
@@ -92,13 +92,14 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     # the memory the settings need, priced before the image is read (ConfigError if over)
     film = scene.sensors()[0].film().crop_size()
     envmap, visibility = memory_needs(scene)
-    check_memory(cfg, WorkingGrid.of(film, cfg.working_pixels), envmap, visibility[0])
+    obj = dsbrdf_object(scene)
+    surfaces = len(bounce_surfaces(scene, obj)[0]) if visibility[0] else 0
+    check_memory(cfg, WorkingGrid.of(film, cfg.working_pixels), envmap, visibility[0], surfaces=surfaces)
     obs, user_mask = load_inputs(image, mask, srgb)
     h, w = obs.shape[:2]
     if (w, h) != (int(film[0]), int(film[1])):
         raise InputError("%s is %dx%d but the scene's film is %dx%d" % (_name(image), w, h, film[0], film[1]))
     model = shipped_model() if model is None else model
-    obj = dsbrdf_object(scene)
     # a film of more than cfg.working_pixels pixels: inference on its block means
     # (mi_dsbrdf.app.working_grid); else on the image itself
     grid, on_object = working_grid(scene, obj, user_mask, cfg.working_pixels)
@@ -108,7 +109,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     ts = TexelSum(working_scene(scene, grid), obj, cfg.map_size if needs.envmap_block else (1, 1),
                   visibility=needs.visibility, to_world=envmap_rotation(scene) if needs.envmap_block else None,
                   samples=cfg.texel_samples if needs.envmap_block else 1,     # the re-render as inference saw it
-                  pixel_rays=cfg.pixel_rays)
+                  pixel_rays=cfg.pixel_rays, surfaces=needs.surfaces)
     keep = usable_blocks(grid, ts.mask, on_object, obs, user_mask, levels)
     if keep.sum() < MIN_PIXELS:
         raise InputError("only %d usable pixels (on the object, inside the mask, unsaturated, off the silhouette); "
@@ -169,7 +170,8 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
            "seconds": rec.seconds,
            "unseen_texels": rows[-1].get("unseen_texels") if rows else None,
            "highlight_doubt": rec.highlight_doubt, "flags": flags,
-           "highlight_change": rec.highlight_change, "highlight_texels": rec.highlight_texels}
+           "highlight_change": rec.highlight_change, "highlight_texels": rec.highlight_texels,
+           "bounce_surfaces": [s.id() for s in needs.surfaces]}
     log["residual"] = relative_residual(obs, rerender, used)
     return Result(material=material, light=light, illumination=rec.illumination, seen=rec.seen, log=log,
                   image=obs, used=used, rerender=rerender, scene_source=source,

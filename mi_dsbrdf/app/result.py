@@ -142,7 +142,8 @@ class Result:
                 json.dump(light, f, indent=1)
         if self.scene_source is not None:
             write_scene_xml(self.scene_source, os.path.join(tmp, "scene.xml"), light,
-                            material_file=os.path.join(out, "material.json"))
+                            material_file=os.path.join(out, "material.json"),
+                            bounce=bool(self.log.get("bounce_surfaces")))
         material_preview(material_file, os.path.join(tmp, "material.png"))
         save_preview(self.image.astype(np.float32), os.path.join(tmp, "input.png"))
         # rerender.png: the written scene.xml as Mitsuba renders it, what a user will get;

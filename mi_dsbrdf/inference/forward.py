@@ -37,6 +37,7 @@ With the reflectance fixed, the image is linear in L: I = T L, and
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 
 import drjit as dr
@@ -44,6 +45,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.brdf.angles import pair_geometry
+from mi_dsbrdf.inference.bounce import DIRECTIONS as BOUNCE_DIRECTIONS, Bounce, diffuse_albedo, surface_weights
 from mi_dsbrdf.inference.highlights import TEXEL_SIDE, HighlightPairs
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_directions
 from mi_dsbrdf.inference.rays import FootprintRays, centre_hits, shadow_test
@@ -69,10 +71,14 @@ class TexelSum:
     pixel_rays : rays per pixel side under a point or directional light
         (:meth:`with_point`, :meth:`with_directions` of one direction; module doc);
         1: the centre ray
+    surfaces : other shapes of ``scene`` whose light onto the object is modelled (one
+        bounce off a diffuse surface, :mod:`~mi_dsbrdf.inference.bounce`; needs
+        ``visibility``): their :class:`~mi_dsbrdf.inference.bounce.Bounce` terms
+        are ``bounces``
     """
 
     def __init__(self, scene, shape, map_size, visibility=False, to_world=None, samples=1, highlights=0,
-                 pixel_rays=1):
+                 pixel_rays=1, surfaces=()):
         sensor = scene.sensors()[0]
         w, h = (int(v) for v in sensor.film().crop_size())
         self.image_size = (h, w)
@@ -89,6 +95,7 @@ class TexelSum:
         self.pixel_rays = _rays_per_side(pixel_rays)
         self.bsdf = shape.bsdf()
         self._scene, self._sensor, self._shape, self._trace = scene, sensor, shape, visibility
+        self._surfaces = tuple(surfaces) if visibility else ()
         self._to_world = None if to_world is None else np.asarray(to_world, dtype=np.float64)[:3, :3]
         self._map(map_size, samples, highlights)
 
@@ -189,7 +196,7 @@ class TexelSum:
         # and solid angle (times the ray's share of its pixel); a map's are pixel x direction
         self.ray_lanes = ray_lanes
         self.highlights = None              # a map's (_map) or none
-        self.visibility = self._trace_visibility(self._scene) if self._trace else None
+        self.visibility, self.bounces = self._trace_visibility(self._scene) if self._trace else (None, ())
 
     def subset(self, rows) -> "TexelSum":
         """The same view restricted to the pixels ``self.pixels[rows]`` (sharing the
@@ -202,8 +209,11 @@ class TexelSum:
         sub.frames = tuple(f[:, rows] for f in self.frames)
         sub.positions = self.positions[:, rows]
         sub.visibility = None if self.visibility is None else self.visibility[rows]
+        sub.bounces = tuple(b.subset(rows) for b in self.bounces)
         if "footprint_rays" in self.__dict__:              # traced already: the pixels' own
             sub.footprint_rays = self.footprint_rays.subset(rows)
+        if "bounce_view" in self.__dict__:
+            sub.bounce_view = self.bounce_view.subset(rows)
         if self.ray_lanes:
             lanes = (rows[:, None] * self.per_texel + np.arange(self.per_texel)).reshape(-1)
             sub.directions, sub.solid_angles = self.directions[lanes], self.solid_angles[lanes]
@@ -257,24 +267,62 @@ class TexelSum:
         return [(t, min(t + step, self.n_directions)) for t in range(0, self.n_directions, step)]
 
     def _trace_visibility(self, scene):
-        """(P, n_directions) bool: the light of each pixel-direction pair reaches its
+        """((P, n_directions) bool: the light of each pixel-direction pair reaches its
         surface point (:func:`~mi_dsbrdf.inference.rays.shadow_test`): a light's rays
-        (one per lane), or the pixels' centre hits."""
+        (one per lane), or the pixels' centre hits; the
+        :class:`~mi_dsbrdf.inference.bounce.Bounce` of each of ``surfaces`` that
+        blocks a pair)."""
         if self.ray_lanes:
             rays = self.footprint_rays
             points, normals, frames = rays.positions, rays.normals, rays.frames
         else:
             points, normals, frames = self.positions, np.array(self.si.n, dtype=np.float64), self.frames
-        return shadow_test(scene, points, normals, frames, self.directions, self.light_position,
-                           self.n_pixels, self.n_directions, self._chunks(), self.ray_lanes)
+        vis, which = shadow_test(scene, points, normals, frames, self.directions, self.light_position,
+                                 self.n_pixels, self.n_directions, self._chunks(), self.ray_lanes, self._surfaces)
+        if self.ray_lanes:              # a light: the surfaces the pixels see, lit by it
+            if not self._surfaces:
+                return vis, ()
+            aux = self.bounce_view
+            if self.light_position is not None:
+                kw = {"position": self.light_position}
+            else:                       # a directional light: its one direction, irradiance 1
+                kw = {"light_directions": self.directions[:1], "solid_angles": np.ones(1)}
+            return vis, tuple(dataclasses.replace(b, pairs=aux, weights=surface_weights(
+                scene, *aux.blocked_rays(b.blocked), **kw)) for b in aux.bounces)
+        bounces = []
+        for k, shape in enumerate(self._surfaces):
+            if not (which == k).any():
+                continue
+            weights = surface_weights(scene, *self.blocked_rays(which == k), light_directions=self.directions,
+                                      solid_angles=self.solid_angles, per_texel=self.per_texel)
+            bounces.append(Bounce(shape.id() or "surface %d" % k, diffuse_albedo(shape), which == k, weights))
+        return vis, tuple(bounces)
 
-    def _weights(self, si, wo, light, t0, t1):
+    @functools.cached_property
+    def bounce_view(self) -> "TexelSum":
+        """This view's pixels lit from the centres of a
+        :data:`~mi_dsbrdf.inference.bounce.DIRECTIONS` map, shadow rays traced: the
+        pairs in which a point or directional light's view sees the other surfaces
+        (traced on first use, shared by every light of the view)."""
+        return self.with_map_size(BOUNCE_DIRECTIONS)
+
+    def blocked_rays(self, blocked) -> tuple:
+        """(points (N, 3), geometric normals (N, 3), directions (N, 3)) of the map
+        view's pairs ``blocked`` (P, n_directions) bool."""
+        pix, pair = np.nonzero(blocked)
+        return self.positions[:, pix].T, np.array(self.si.n, dtype=np.float64)[:, pix].T, self.directions[pair]
+
+    def _weights(self, si, wo, light, t0, t1, mask=None):
         """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f
-        (``light``: the lanes' indices into ``solid_angles``, of :meth:`_pairs`)."""
+        (``light``: the lanes' indices into ``solid_angles``, of :meth:`_pairs`).
+        ``mask`` (P, n_directions) bool: the lanes kept instead of the visible ones
+        (a bounce's blocked pairs), the highlight pairs among them."""
         ctx = mi.BSDFContext()
         f = self.bsdf.eval(ctx, si, wo)
         omega = dr.gather(mi.Float, mi.Float(self.solid_angles.astype(np.float32)), light)
         f = f * omega
+        if mask is not None:
+            return dr.select(mi.Bool(mask[:, t0:t1].reshape(-1)), f, 0.0)
         if self.visibility is not None:
             v = mi.Bool(self.visibility[:, t0:t1].reshape(-1))
             f = dr.select(v, f, 0.0)
@@ -298,13 +346,27 @@ class TexelSum:
             if self.highlights is not None:
                 h = dr.block_sum(self.highlights.plugin_weights(self.bsdf), self.highlights.per_pair)
                 self.highlights.add_to(out, np.array(h).reshape(3, self.n_pixels, -1))
+            for bounce in self.bounces:                  # rank one a surface (inference/bounce.py)
+                b = sum(np.array(f).reshape(3, self.n_pixels) for f in self._bounce_chunks(bounce))
+                out += (b[:, :, None] * bounce.transport_term[:, None, :]).astype(np.float32)
         return out
 
-    def pair_geometry(self) -> tuple:
+    def _bounce_chunks(self, bounce):
+        """Yield (P,) Color3f: each pixel's sum of BSDF * cosine * solid angle over the
+        pairs ``bounce`` blocks, a chunk of directions at a time (with whatever AD
+        graph the BSDF parameters carry)."""
+        view = self if bounce.pairs is None else bounce.pairs.with_bsdf(self.bsdf)
+        for t0, t1 in view._chunks():
+            si, wo, _, _, light = view._pairs(t0, t1)
+            yield dr.block_sum(view._weights(si, wo, light, t0, t1, bounce.blocked), t1 - t0)
+
+    def pair_geometry(self, mask=None) -> tuple:
         """What an isotropic BRDF sees of each pixel-texel pair: (log cos theta_h,
         theta_d, weight), three Dr.Jit Floats of P * n_directions lanes (pixel-major), the
         weight cos theta_o * solid angle (* visibility), zero unless the camera and
-        the texel are both above the surface (the plugins' ``both_above``).
+        the texel are both above the surface (the plugins' ``both_above``). ``mask``
+        (P, n_directions) bool: the pairs weighted instead of the visible ones (a
+        bounce's blocked pairs, :mod:`~mi_dsbrdf.inference.bounce`).
         :class:`~mi_dsbrdf.inference.lobes.LobeSum` evaluates the DSBRDF on them."""
         P, nt = self.n_pixels, self.n_directions
         n_light = self.directions.shape[0]
@@ -328,9 +390,11 @@ class TexelSum:
         d = [dr.gather(mi.Float, buf, per_light + first + k * n_light) for k in range(3)]
         omega = dr.gather(mi.Float, buf, per_light + first + 3 * n_light)
         log_cos, theta_d, weight = pair_geometry((s_, t_, n_), wi, d, omega)
-        if self.visibility is not None:
+        if mask is not None:                          # a bounce's blocked pairs
+            weight = dr.select(mi.Bool(mask.reshape(-1)), weight, 0.0)
+        elif self.visibility is not None:
             weight = dr.select(mi.Bool(self.visibility.reshape(-1)), weight, 0.0)
-        if self.highlights is not None:               # those pairs are the highlights' (class doc)
+        if self.highlights is not None and mask is None:       # those pairs are the highlights' (class doc)
             dr.scatter(weight, 0.0, mi.UInt32(self.highlights.excluded(self.per_texel, 0, nt).astype(np.uint32)))
         out = (log_cos, theta_d, weight)
         dr.eval(*out)
@@ -354,6 +418,10 @@ class TexelSum:
             _, direction = h.lanes()
             f = h.plugin_weights(self.bsdf) * dr.gather(mi.Color3f, Lt, direction // h.texel_side ** 2)
             yield dr.block_sum(f, h.texels.shape[1] * h.per_pair)
+        for bounce in self.bounces:                      # its radiance on the pairs it blocks
+            R = mi.Color3f(*(float(v) for v in bounce.radiance(L)))
+            for f in self._bounce_chunks(bounce):
+                yield f * R
 
     def reflectance_jacobian(self, illumination, params, keys):
         """Pixel radiance (P, 3) and its Jacobian (P, 3, n) with respect to the BSDF

@@ -88,6 +88,26 @@ class LobeSum:
         return None if h is None else h.geometry()
 
     @functools.cached_property
+    def bounce_geometry(self) -> list:
+        """Per :class:`~mi_dsbrdf.inference.bounce.Bounce` of the view: the
+        (log cos theta_h, theta_d, weight) of the pairs it blocks (the weight zero
+        elsewhere; a map's own pairs, or its ``pairs`` view's), and their number a pixel."""
+        out = []
+        for b in self.texels.bounces:
+            if b.pairs is None:
+                out.append(((*self.geometry[:2], self.texels.pair_geometry(b.blocked)[2]), self.n_directions))
+            else:
+                out.append((b.pairs.pair_geometry(b.blocked), b.pairs.n_directions))
+        return out
+
+    def _bounce_sums(self, terms, n_terms, chunk):
+        """Per bounce: yield (its index, p0, p1, (n_terms, p1 - p0)): each pixel's sum
+        over all the pairs it blocks of ``terms(lc, td, w)``."""
+        for k, (geometry, n) in enumerate(self.bounce_geometry):
+            for p0, p1, sums in self._lane_sums(geometry, 1, n, terms, n_terms, chunk):
+                yield k, p0, p1, sums[..., 0]
+
+    @functools.cached_property
     def unseen(self) -> np.ndarray:
         """(T,) bool: texels no observed pixel can receive light from, whatever the
         material: below every pixel's horizon, or blocked. (A test on the transport
@@ -98,6 +118,9 @@ class LobeSum:
         if h is not None:
             lit = dr.block_sum(self.highlight_geometry[2], h.per_pair).numpy() > 0
             seen[h.texels.reshape(-1)[lit]] = True
+        for b, (geometry, _) in zip(self.texels.bounces, self.bounce_geometry):   # seen through a surface's light
+            if dr.max(geometry[2])[0] > 0:
+                seen |= b.weights > 0
         return ~seen
 
     def subset(self, rows) -> "LobeSum":
@@ -195,8 +218,18 @@ class LobeSum:
 
     def transport(self, material) -> np.ndarray:
         """(3, P, T) float32 transport of :meth:`TexelSum.transport`:
-        radiance[p, c] = T[c, p] @ L[:, c]."""
-        return self._channels(material, np.empty((3, self.n_pixels, self.n_texels), np.float32))
+        radiance[p, c] = T[c, p] @ L[:, c]; with the view's bounces, their rank-one
+        terms (:mod:`~mi_dsbrdf.inference.bounce`)."""
+        out = self._channels(material, np.empty((3, self.n_pixels, self.n_texels), np.float32))
+        if self.texels.bounces:
+            lk, lg, ch = self._scalars(material)
+
+            def rgb(lc, td, w):
+                return [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
+            for k, p0, p1, b in self._bounce_sums(rgb, 3, VALUE_CHUNK):
+                m = self.texels.bounces[k].transport_term
+                out[:, p0:p1] += (b[:, :, None] * m[:, None, :]).astype(np.float32)
+        return out
 
     def render(self, material, illumination) -> np.ndarray:
         """(P, 3) float64 radiance under ``illumination`` (T, 3)."""
@@ -239,6 +272,9 @@ class LobeSum:
         for p0, p1, A in self._highlight_sums(terms, n_cols, JACOBIAN_CHUNK):
             flat = np.einsum("npk,pkc->ncp", A, L[h.texels[p0:p1]])          # A: (columns, pixels, K)
             sums[..., p0:p1] += flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
+        for k, p0, p1, A in self._bounce_sums(terms, n_cols, JACOBIAN_CHUNK):     # A: (columns, pixels)
+            rad = self.texels.bounces[k].radiance(L)                # (3,): the surface's, under L
+            sums[..., p0:p1] += (A[:, None, :] * rad[None, :, None]).reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         sums *= s
         c = material.chromaticity[:, :, None]                      # (R, 3, 1)
         image = (sums[:, 0] * c).sum(axis=0).T

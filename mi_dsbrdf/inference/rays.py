@@ -10,6 +10,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_dsbrdf.inference.bounce import shape_index
+
 
 def centre_hits(scene, sensor, shape) -> tuple:
     """(the SurfaceInteraction of the ray through each pixel centre of ``sensor``'s
@@ -90,9 +92,11 @@ class FootprintRays:
 
 
 def shadow_test(scene, points, normals, frames, directions, position, n_pixels, n_directions, chunks,
-                ray_lanes) -> np.ndarray:
-    """(n_pixels, n_directions) bool: the light of each pixel-direction pair reaches
-    the surface point, by shadow rays (``scene.ray_test``) through the whole scene,
+                ray_lanes, surfaces=()) -> tuple:
+    """((n_pixels, n_directions) bool: the light of each pixel-direction pair reaches
+    the surface point; (n_pixels, n_directions) int8: the index in ``surfaces`` of
+    the shape that blocks it, -1 for none of them; None without ``surfaces``), by
+    shadow rays through the whole scene,
     so that the object shadows itself and every other shape shadows it. Pairs with
     the light or the camera below the surface are left True (their weight is zero).
     A ray runs towards the direction to infinity (a texel's direction, a directional
@@ -114,6 +118,7 @@ def shadow_test(scene, points, normals, frames, directions, position, n_pixels, 
                                    directions.T.reshape(-1), target]).astype(np.float32))
     light0 = 18 * width
     vis = np.ones((P, nd), dtype=bool)
+    which = np.full((P, nd), -1, dtype=np.int8) if surfaces else None
     for t0, t1 in chunks:
         nt = t1 - t0
         lane = dr.arange(mi.UInt32, P * nt)
@@ -133,6 +138,14 @@ def shadow_test(scene, points, normals, frames, directions, position, n_pixels, 
             ray = si.spawn_ray_to(mi.Point3f(vec(0, dr.zeros(mi.UInt32, P * nt) + light0 + 3 * n_light, 1)))
         else:
             ray = si.spawn_ray(frame.to_world(wo))
-        blocked = scene.ray_test(ray, (wo.z > 0) & (wi_z > 0))
+        active = (wo.z > 0) & (wi_z > 0)
+        if surfaces:
+            pi = scene.ray_intersect_preliminary(ray, active=active)
+            blocked = pi.is_valid() & active
+            which[:, t0:t1] = shape_index(pi, surfaces).reshape(P, nt)
+        else:
+            blocked = scene.ray_test(ray, active)
         vis[:, t0:t1] = ~blocked.numpy().reshape(P, nt)
-    return vis
+    if surfaces:
+        which[vis] = -1
+    return vis, which

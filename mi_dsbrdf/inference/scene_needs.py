@@ -9,8 +9,9 @@ Given the loaded Mitsuba scene, the observed image and its mask, decide:
   shape) alone in the scene, whose surface never shadows itself; otherwise shadow
   rays through the whole scene, so that a non-convex object shadows itself and
   every other shape shadows it;
-* the light other shapes reflect onto the object: not modelled (the log says so
-  when there are other shapes; the README gives what leaving it out costs);
+* the light other shapes reflect onto the object: one bounce off each with a
+  ``diffuse`` BSDF of constant reflectance (:mod:`~mi_dsbrdf.inference.bounce`),
+  none off the others (the log names them);
 * the lobes and bases of the reflectance model.
 
 Each decision comes with its reason, printed in the inference log. Errors on
@@ -25,6 +26,7 @@ import numpy as np
 import trimesh
 
 from mi_dsbrdf.errors import SceneError
+from mi_dsbrdf.inference.bounce import diffuse_albedo
 from mi_dsbrdf.plugins import bsdf_classes
 
 GREY_TOLERANCE = 1e-3
@@ -40,6 +42,7 @@ class SceneNeeds:
     n_lobes: int
     n_bases: int
     reasons: tuple          # one line per decision, for the log
+    surfaces: tuple = ()    # other shapes whose light onto the object is modelled (bounce_surfaces)
 
     @property
     def envmap_block(self) -> bool:
@@ -90,6 +93,23 @@ def other_shapes(scene, obj) -> list:
         sid = shape.id()
         names.append("%s (%s)" % (sid, kind) if sid and not sid.startswith("_unnamed") else kind)
     return names
+
+
+def bounce_surfaces(scene, obj) -> tuple:
+    """(the other shapes of ``scene`` whose light onto ``obj`` is modelled: a
+    ``diffuse`` BSDF of constant reflectance; the reason, one line)."""
+    modelled, names, left = [], [], []
+    for shape, name in zip([s for s in scene.shapes() if s != obj], other_shapes(scene, obj)):
+        rho = diffuse_albedo(shape)
+        if rho is None:
+            left.append("%s (a %s BSDF)" % (name, shape.bsdf().class_name() if shape.bsdf() else "missing"))
+        else:
+            modelled.append(shape)
+            names.append("%s (diffuse, reflectance %s)" % (name, " ".join("%.3g" % v for v in rho)))
+    why = "one bounce off %s" % ", ".join(names[:MAX_NAMED]) if names else "none"
+    if left:
+        why += "; not modelled off %s: only a diffuse of constant reflectance is" % ", ".join(left[:MAX_NAMED])
+    return tuple(modelled), why
 
 
 def needs_visibility(scene, obj, light=None) -> tuple:
@@ -143,7 +163,9 @@ def decide(scene, image, mask=None, n_lobes=3, n_bases=10, visibility=None) -> S
     reasons.append("colour pass: %s" % ("no (the image is grey)" if grey else "yes (the image has colour)"))
     trace, why = needs_visibility(scene, obj, light) if visibility is None else visibility
     reasons.append("visibility rays: %s (%s)" % ("yes" if trace else "no", why))
+    surfaces = ()
     if other_shapes(scene, obj):
-        reasons.append("light reflected by the other shapes onto the object: not modelled (they only shadow it)")
+        surfaces, why = bounce_surfaces(scene, obj)
+        reasons.append("light the other shapes reflect onto the object: %s" % why)
     reasons.append("reflectance: %d lobes, %d bases" % (n_lobes, n_bases))
-    return SceneNeeds(light, not grey, trace, n_lobes, n_bases, tuple(reasons))
+    return SceneNeeds(light, not grey, trace, n_lobes, n_bases, tuple(reasons), surfaces)

@@ -1,0 +1,152 @@
+"""The light other shapes of the scene reflect onto the object: one bounce off each
+diffuse surface, linear in the light. (Beyond the paper, whose object is alone.)
+
+A pixel-direction pair whose shadow ray meets another shape s receives what s
+reflects, not the light's radiance. For a shape whose BSDF is ``diffuse`` with a
+constant reflectance rho_s (a table, a wall, the ground), taken as uniformly lit,
+that is its radiance
+
+    R_s = rho_s / pi * sum_j g_sj L_j,
+    g_sj = mean over y of [max(0, n_s(y) . d_j) V(y, d_j)] Omega_j,
+
+the mean over :data:`POINTS` points y of s that the object's blocked pairs meet
+(so that the object's own shadow on s counts as often as the object sees it),
+over the light's directions d_j with their solid angles (a map's texels; a
+point light's direction and 1 / r^2 from y; a directional light's one
+direction). Pixel p then gains b_s(p) R_s, b_s(p) the texel sum of p over the
+pairs s blocks (the visibility's complement there), so that
+
+    I = T L + sum_s b_s (m_s . L),   m_s = rho_s / pi * g_s:
+
+a rank-one term per surface in the transport, and the illumination block stays
+linear (:meth:`~mi_dsbrdf.inference.lobes.LobeSum.transport`). The light the
+object reflects onto itself, and off surfaces of any other BSDF, is not
+modelled (:mod:`~mi_dsbrdf.inference.scene_needs` says which).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+#: points of a surface its light is averaged over (module doc)
+POINTS = 512
+#: under a point or a directional light: the map (texels, their centres) whose
+#: directions find the surfaces each pixel sees (:attr:`Bounce.pairs`)
+DIRECTIONS = (16, 32)
+#: shadow rays from a surface's points traced at once
+CHUNK_RAYS = 1 << 19
+
+
+@dataclasses.dataclass(frozen=True)
+class Bounce:
+    """One diffuse surface's light onto the object, for one view and light.
+
+    name : the shape's id (or kind)
+    albedo : (3,) its reflectance
+    blocked : (P, n) bool: the pixel-direction pairs it blocks, of ``pairs``
+    weights : (n_texels,) g_s of the module doc under the view's light, summed over
+        each texel's directions
+    pairs : None: the view's own pairs (a map's); else the map view (a
+        :class:`~mi_dsbrdf.inference.forward.TexelSum` over the same pixels, lit
+        from :data:`DIRECTIONS`) whose pairs ``blocked`` indexes: a point or a
+        directional light's rays see the light alone, not the surface
+    """
+    name: str
+    albedo: np.ndarray
+    blocked: np.ndarray
+    weights: np.ndarray
+    pairs: object = None
+
+    @property
+    def transport_term(self) -> np.ndarray:
+        """(3, n_texels) m_s: the surface's radiance per unit light in each texel."""
+        return self.albedo[:, None] / math.pi * self.weights[None, :]
+
+    def radiance(self, illumination) -> np.ndarray:
+        """(3,) R_s under ``illumination`` (n_texels, 3)."""
+        return (self.transport_term * np.asarray(illumination, dtype=np.float64).reshape(-1, 3).T).sum(axis=1)
+
+    def subset(self, rows) -> "Bounce":
+        return dataclasses.replace(self, blocked=self.blocked[rows],
+                                   pairs=None if self.pairs is None else self.pairs.subset(rows))
+
+
+def diffuse_albedo(shape):
+    """(3,) the constant reflectance of ``shape``'s BSDF when it is ``diffuse``
+    with one; else None (a texture, another BSDF)."""
+    bsdf = shape.bsdf()
+    if bsdf is None or bsdf.class_name() != "SmoothDiffuse":
+        return None
+    value = mi.traverse(bsdf).get("reflectance.value")
+    if value is None:
+        return None
+    rho = np.array(value, dtype=np.float64).reshape(-1)
+    return np.resize(rho, 3) if rho.size in (1, 3) else None
+
+
+def surface_weights(scene, origins, normals, directions, light_directions=None, solid_angles=None, per_texel=1,
+                    position=None, points=POINTS) -> np.ndarray:
+    """g_s of the module doc, (n_texels,), for the surface the rays from the object's
+    points ``origins`` (N, 3) with geometric ``normals`` (N, 3) along ``directions``
+    (N, 3) meet (a sample of the pairs it blocks; at most ``points`` of them are
+    used). The light: a point light at ``position``; else
+    the world directions ``light_directions`` (M, 3) with ``solid_angles`` (M,), in
+    texels of ``per_texel`` consecutive directions (a map's, or one direction with
+    solid angle 1: a directional light)."""
+    n = min(points, origins.shape[0])
+    pick = np.linspace(0, origins.shape[0] - 1, n).round().astype(np.int64)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.p = mi.Point3f(*origins[pick].T.astype(np.float32))
+    si.n = mi.Normal3f(*normals[pick].T.astype(np.float32))
+    d = directions[pick]
+    hit = scene.ray_intersect(si.spawn_ray(mi.Vector3f(*d.T.astype(np.float32))))
+    y = np.array(hit.p, dtype=np.float64).T
+    nrm = np.array(hit.n, dtype=np.float64).T
+    nrm *= np.where((nrm * d).sum(axis=1) > 0, -1.0, 1.0)[:, None]          # the side the object sees
+    if position is not None:
+        to = np.asarray(position, dtype=np.float64).reshape(1, 3) - y
+        r2 = np.maximum((to * to).sum(axis=1), 1e-12)
+        dirs = to / np.sqrt(r2)[:, None]
+        lit = _unblocked(scene, y, nrm, dirs, np.sqrt(r2))
+        return np.array([float((np.maximum((dirs * nrm).sum(axis=1), 0.0) * lit / r2).mean())])
+    m = light_directions.shape[0]
+    g = np.zeros(m)
+    step = max(1, CHUNK_RAYS // m)                  # points a launch: bounded memory at any map size
+    for i in range(0, y.shape[0], step):
+        yc, nc = y[i:i + step], nrm[i:i + step]
+        ys, ns = np.repeat(yc, m, axis=0), np.repeat(nc, m, axis=0)
+        ds = np.tile(light_directions, (yc.shape[0], 1))
+        lit = _unblocked(scene, ys, ns, ds)
+        g += (np.maximum((ds * ns).sum(axis=1), 0.0) * lit).reshape(yc.shape[0], m).sum(axis=0)
+    g *= solid_angles / y.shape[0]
+    return g.reshape(-1, int(per_texel)).sum(axis=1)
+
+
+def _unblocked(scene, points, normals, directions, distance=None) -> np.ndarray:
+    """(N,) bool: rays from ``points`` on surfaces of ``normals`` along ``directions``
+    (for ``distance`` (N,) if given) meet nothing (Mitsuba's own offset of a ray
+    leaving a surface: a fixed one met the surface itself)."""
+    si = dr.zeros(mi.SurfaceInteraction3f, points.shape[0])
+    si.p = mi.Point3f(*points.T.astype(np.float32))
+    si.n = mi.Normal3f(*normals.T.astype(np.float32))
+    d = mi.Vector3f(*directions.T.astype(np.float32))
+    if distance is None:
+        ray = si.spawn_ray(d)
+    else:
+        ray = si.spawn_ray_to(si.p + d * mi.Float(np.asarray(distance, dtype=np.float32)))
+    return ~np.array(scene.ray_test(ray), dtype=bool)
+
+
+def shape_index(pi, shapes) -> np.ndarray:
+    """(N,) int8: the index in ``shapes`` of the shape each preliminary intersection
+    ``pi`` meets, -1 for none of them (or no hit)."""
+    hit = np.array(pi.is_valid(), dtype=bool)
+    ptr = np.array(dr.reinterpret_array(mi.UInt32, pi.shape))
+    out = np.full(hit.shape, -1, dtype=np.int8)
+    for i, shape in enumerate(shapes):
+        out[hit & (ptr == np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))] = i
+    return out
