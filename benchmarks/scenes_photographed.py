@@ -390,6 +390,10 @@ def main(argv=None):
     ap.add_argument("--bounce", action="store_true",
                     help="no recovery: the forward model against Mitsuba's direct and path renders, with and "
                          "without a one-bounce ground term (bounce_case), on the set's cases")
+    ap.add_argument("--clean-from", metavar="FOLDER",
+                    help="take the clean twins' results from out/scenes_photographed/FOLDER (they do not depend "
+                         "on the scene's other shapes)")
+    ap.add_argument("--tag", default="", help="suffix of the result folder and the summary's name")
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
     if not have_data(args.data):
@@ -409,7 +413,7 @@ def main(argv=None):
         with open(os.path.join(RESULTS, "scenes_photographed_bounce_%s.json" % args.set), "w") as f:
             json.dump(summary, f, indent=1)
         return
-    tag = args.set + ("" if args.photo == "path" else "_direct")
+    tag = args.set + ("" if args.photo == "path" else "_direct") + ("_" + args.tag if args.tag else "")
     folder = os.path.join(OUT, "scenes_photographed", tag)
     os.makedirs(folder, exist_ok=True)
 
@@ -419,9 +423,9 @@ def main(argv=None):
             with open(path) as f:
                 return json.load(f)
         t0 = time.perf_counter()
-        twin = os.path.join(OUT, "scenes_photographed", args.set, name + ".json")     # the path run's
+        twin = os.path.join(OUT, "scenes_photographed", args.clean_from or args.set, name + ".json")
         clean = None
-        if args.photo != "path" and os.path.exists(twin):
+        if (args.clean_from or args.photo != "path") and os.path.exists(twin):
             with open(twin) as f:
                 clean = json.load(f)["clean"]
         r = fn(*a, args.photo, args.data, clean)
@@ -436,8 +440,9 @@ def main(argv=None):
             for m, p, o in cases(args.set, args.limit)]
     materials = VALIDATION_MATERIALS if args.set == "validation" else REPORT_MATERIALS
     point = run("%s-point-blocker" % materials[0], point_case, materials[0])
-    command = "python benchmarks/scenes_photographed.py --set %s%s%s" % (
-        args.set, " --limit %d" % args.limit if args.limit else "", "" if args.photo == "path" else " --photo direct")
+    command = "python benchmarks/scenes_photographed.py --set %s%s%s%s" % (
+        args.set, " --limit %d" % args.limit if args.limit else "", "" if args.photo == "path" else " --photo direct",
+        " --tag " + args.tag if args.tag else "")
     s = summarise(rows, point, command)
     print(table(s))
     os.makedirs(RESULTS, exist_ok=True)

@@ -36,7 +36,7 @@ import numpy as np
 POINTS = 512
 #: under a point or a directional light: the map (texels, their centres) whose
 #: directions find the surfaces each pixel sees (:attr:`Bounce.pairs`)
-DIRECTIONS = (16, 32)
+DIRECTIONS = (8, 16)
 #: shadow rays from a surface's points traced at once
 CHUNK_RAYS = 1 << 19
 
@@ -54,12 +54,15 @@ class Bounce:
         :class:`~mi_dsbrdf.inference.forward.TexelSum` over the same pixels, lit
         from :data:`DIRECTIONS`) whose pairs ``blocked`` indexes: a point or a
         directional light's rays see the light alone, not the surface
+    points : (points (N, 3), normals (N, 3)): the surface's points the weights
+        average over (:func:`surface_points`), the same for every light
     """
     name: str
     albedo: np.ndarray
     blocked: np.ndarray
     weights: np.ndarray
     pairs: object = None
+    points: tuple = None
 
     @property
     def transport_term(self) -> np.ndarray:
@@ -88,15 +91,11 @@ def diffuse_albedo(shape):
     return np.resize(rho, 3) if rho.size in (1, 3) else None
 
 
-def surface_weights(scene, origins, normals, directions, light_directions=None, solid_angles=None, per_texel=1,
-                    position=None, points=POINTS) -> np.ndarray:
-    """g_s of the module doc, (n_texels,), for the surface the rays from the object's
-    points ``origins`` (N, 3) with geometric ``normals`` (N, 3) along ``directions``
-    (N, 3) meet (a sample of the pairs it blocks; at most ``points`` of them are
-    used). The light: a point light at ``position``; else
-    the world directions ``light_directions`` (M, 3) with ``solid_angles`` (M,), in
-    texels of ``per_texel`` consecutive directions (a map's, or one direction with
-    solid angle 1: a directional light)."""
+def surface_points(scene, origins, normals, directions, points=POINTS) -> tuple:
+    """(points (n, 3), normals (n, 3) facing the object) of the surface that the rays
+    from the object's points ``origins`` (N, 3) with geometric ``normals`` (N, 3)
+    along ``directions`` (N, 3) meet: a sample of the pairs it blocks, at most
+    ``points`` of them, evenly spread over them."""
     n = min(points, origins.shape[0])
     pick = np.linspace(0, origins.shape[0] - 1, n).round().astype(np.int64)
     si = dr.zeros(mi.SurfaceInteraction3f, n)
@@ -107,6 +106,17 @@ def surface_weights(scene, origins, normals, directions, light_directions=None, 
     y = np.array(hit.p, dtype=np.float64).T
     nrm = np.array(hit.n, dtype=np.float64).T
     nrm *= np.where((nrm * d).sum(axis=1) > 0, -1.0, 1.0)[:, None]          # the side the object sees
+    return y, nrm
+
+
+def surface_weights(scene, points, light_directions=None, solid_angles=None, per_texel=1,
+                    position=None) -> np.ndarray:
+    """g_s of the module doc, (n_texels,), over the surface's ``points`` ((n, 3)
+    points, (n, 3) normals: :func:`surface_points`). The light: a point light at
+    ``position``; else the world directions ``light_directions`` (M, 3) with
+    ``solid_angles`` (M,), in texels of ``per_texel`` consecutive directions (a
+    map's, or one direction with solid angle 1: a directional light)."""
+    y, nrm = points
     if position is not None:
         to = np.asarray(position, dtype=np.float64).reshape(1, 3) - y
         r2 = np.maximum((to * to).sum(axis=1), 1e-12)
@@ -150,3 +160,19 @@ def shape_index(pi, shapes) -> np.ndarray:
     for i, shape in enumerate(shapes):
         out[hit & (ptr == np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))] = i
     return out
+
+
+def compact_pairs(geometry, blocked) -> tuple:
+    """The pairs ``blocked`` (P, n) bool of a view's pair geometry (three Dr.Jit
+    Floats of P * n lanes, pixel-major): (their geometry, three Floats of the blocked
+    lanes alone, pixel-major; (P,) uint32 each pixel's first lane among them; (P,)
+    uint32 their number). A surface blocks a fraction of a pixel's directions: the
+    sums over them loop over those alone."""
+    lanes = np.flatnonzero(blocked.reshape(-1)).astype(np.uint32)
+    counts = blocked.sum(axis=1).astype(np.uint32)
+    first = (np.cumsum(counts) - counts).astype(np.uint32)
+    index = mi.UInt32(lanes)
+    out = tuple(dr.gather(mi.Float, a, index) for a in geometry)
+    dr.eval(*out)
+    return out, first, counts
+

@@ -45,7 +45,8 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.brdf.angles import pair_geometry
-from mi_dsbrdf.inference.bounce import DIRECTIONS as BOUNCE_DIRECTIONS, Bounce, diffuse_albedo, surface_weights
+from mi_dsbrdf.inference.bounce import (DIRECTIONS as BOUNCE_DIRECTIONS, POINTS as BOUNCE_POINTS, Bounce,
+                                        compact_pairs, diffuse_albedo, surface_points, surface_weights)
 from mi_dsbrdf.inference.highlights import TEXEL_SIDE, HighlightPairs
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_directions
 from mi_dsbrdf.inference.rays import FootprintRays, centre_hits, shadow_test
@@ -163,6 +164,8 @@ class TexelSum:
         ``light(footprint_rays)`` gives each ray's direction (N, 3) and solid angle
         times its share (N,)."""
         rays = self.footprint_rays       # traced once, shared by every light of this view
+        if self._surfaces:
+            self.bounce_view             # so is the map that finds the surfaces, and its geometry
         out = copy.copy(self)
         out._light(*light(rays), position, per_texel=rays.side ** 2, ray_lanes=True)
         return out
@@ -196,6 +199,8 @@ class TexelSum:
         # and solid angle (times the ray's share of its pixel); a map's are pixel x direction
         self.ray_lanes = ray_lanes
         self.highlights = None              # a map's (_map) or none
+        for key in ("bounce_pair_geometry", "bounce_memo"):          # the last light's
+            self.__dict__.pop(key, None)
         self.visibility, self.bounces = self._trace_visibility(self._scene) if self._trace else (None, ())
 
     def subset(self, rows) -> "TexelSum":
@@ -209,11 +214,15 @@ class TexelSum:
         sub.frames = tuple(f[:, rows] for f in self.frames)
         sub.positions = self.positions[:, rows]
         sub.visibility = None if self.visibility is None else self.visibility[rows]
-        sub.bounces = tuple(b.subset(rows) for b in self.bounces)
         if "footprint_rays" in self.__dict__:              # traced already: the pixels' own
             sub.footprint_rays = self.footprint_rays.subset(rows)
         if "bounce_view" in self.__dict__:
             sub.bounce_view = self.bounce_view.subset(rows)
+        sub.bounces = tuple(b.subset(rows) if b.pairs is None
+                            else dataclasses.replace(b, blocked=b.blocked[rows], pairs=sub.bounce_view)
+                            for b in self.bounces)
+        for key in ("bounce_memo", "bounce_pair_geometry"):        # its pixels' own, made anew
+            sub.__dict__.pop(key, None)
         if self.ray_lanes:
             lanes = (rows[:, None] * self.per_texel + np.arange(self.per_texel)).reshape(-1)
             sub.directions, sub.solid_angles = self.directions[lanes], self.solid_angles[lanes]
@@ -287,15 +296,21 @@ class TexelSum:
                 kw = {"position": self.light_position}
             else:                       # a directional light: its one direction, irradiance 1
                 kw = {"light_directions": self.directions[:1], "solid_angles": np.ones(1)}
-            return vis, tuple(dataclasses.replace(b, pairs=aux, weights=surface_weights(
-                scene, *aux.blocked_rays(b.blocked), **kw)) for b in aux.bounces)
+            return vis, tuple(dataclasses.replace(b, pairs=aux, weights=surface_weights(scene, b.points, **kw))
+                              for b in aux.bounces)
         bounces = []
         for k, shape in enumerate(self._surfaces):
-            if not (which == k).any():
+            blocked = which == k
+            lanes = np.flatnonzero(blocked)
+            if lanes.size == 0:
                 continue
-            weights = surface_weights(scene, *self.blocked_rays(which == k), light_directions=self.directions,
+            lanes = lanes[np.linspace(0, lanes.size - 1, min(BOUNCE_POINTS, lanes.size)).round().astype(np.int64)]
+            pix, pair = lanes // self.n_directions, lanes % self.n_directions
+            points = surface_points(scene, self.positions[:, pix].T, normals[:, pix].T, self.directions[pair])
+            weights = surface_weights(scene, points, light_directions=self.directions,
                                       solid_angles=self.solid_angles, per_texel=self.per_texel)
-            bounces.append(Bounce(shape.id() or "surface %d" % k, diffuse_albedo(shape), which == k, weights))
+            bounces.append(Bounce(shape.id() or "surface %d" % k, diffuse_albedo(shape), blocked, weights,
+                                  points=points))
         return vis, tuple(bounces)
 
     @functools.cached_property
@@ -306,11 +321,19 @@ class TexelSum:
         (traced on first use, shared by every light of the view)."""
         return self.with_map_size(BOUNCE_DIRECTIONS)
 
-    def blocked_rays(self, blocked) -> tuple:
-        """(points (N, 3), geometric normals (N, 3), directions (N, 3)) of the map
-        view's pairs ``blocked`` (P, n_directions) bool."""
-        pix, pair = np.nonzero(blocked)
-        return self.positions[:, pix].T, np.array(self.si.n, dtype=np.float64)[:, pix].T, self.directions[pair]
+    @functools.cached_property
+    def bounce_memo(self) -> dict:
+        """Sums over the pairs of :attr:`bounces` already made, for a few materials
+        (:meth:`LobeSum._bounce_sums <mi_dsbrdf.inference.lobes.LobeSum._bounce_sums>`):
+        under a light they do not depend on the light, which a light search moves."""
+        return {}
+
+    @functools.cached_property
+    def bounce_pair_geometry(self) -> list:
+        """:func:`~mi_dsbrdf.inference.bounce.compact_pairs` of the pairs each of
+        ``bounces`` blocks (computed on first use; a light's views share their
+        :attr:`bounce_view`'s)."""
+        return [compact_pairs(self.pair_geometry(b.blocked), b.blocked) for b in self.bounces]
 
     def _weights(self, si, wo, light, t0, t1, mask=None):
         """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f
@@ -348,7 +371,9 @@ class TexelSum:
                 self.highlights.add_to(out, np.array(h).reshape(3, self.n_pixels, -1))
             for bounce in self.bounces:                  # rank one a surface (inference/bounce.py)
                 b = sum(np.array(f).reshape(3, self.n_pixels) for f in self._bounce_chunks(bounce))
-                out += (b[:, :, None] * bounce.transport_term[:, None, :]).astype(np.float32)
+                m = bounce.transport_term.astype(np.float32)
+                for c in range(3):
+                    out[c] += np.multiply.outer(b[c].astype(np.float32), m[c])
         return out
 
     def _bounce_chunks(self, bounce):

@@ -36,9 +36,12 @@ import numpy as np
 from mi_dsbrdf.brdf.curves import N_CONTROL, spline_basis
 from mi_dsbrdf.brdf.dsbrdf import LOG_COS_H_MIN, lobe_curves, lobe_rgb, lobe_value
 from mi_dsbrdf.brdf.observed import N_CELLS, DirectionWeights, cell_sums
+from mi_dsbrdf.inference.bounce import compact_pairs
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.transport import apply_transport, unit_scaled
 
+#: materials whose sums over a light's bounce pairs are kept (LobeSum._bounce_sums)
+MEMO_MATERIALS = 4
 #: pairs per kernel launch: the transport writes 3 floats a pair (a 128x128 sphere
 #: under a 32x64 map, 24.5M pairs, in one launch), the Jacobian 39
 VALUE_CHUNK, JACOBIAN_CHUNK = 1 << 25, 1 << 22
@@ -90,22 +93,38 @@ class LobeSum:
     @functools.cached_property
     def bounce_geometry(self) -> list:
         """Per :class:`~mi_dsbrdf.inference.bounce.Bounce` of the view: the
-        (log cos theta_h, theta_d, weight) of the pairs it blocks (the weight zero
-        elsewhere; a map's own pairs, or its ``pairs`` view's), and their number a pixel."""
+        (log cos theta_h, theta_d, weight) of the pairs it blocks, compacted
+        (:func:`~mi_dsbrdf.inference.bounce.compact_pairs`): a map's own pairs, or
+        its ``pairs`` view's (a light's map of directions, shared by its lights)."""
         out = []
-        for b in self.texels.bounces:
+        for k, b in enumerate(self.texels.bounces):
             if b.pairs is None:
-                out.append(((*self.geometry[:2], self.texels.pair_geometry(b.blocked)[2]), self.n_directions))
+                dense = (*self.geometry[:2], self.texels.pair_geometry(b.blocked)[2])
+                out.append(compact_pairs(dense, b.blocked))
             else:
-                out.append((b.pairs.pair_geometry(b.blocked), b.pairs.n_directions))
+                out.append(b.pairs.bounce_pair_geometry[k])
         return out
 
-    def _bounce_sums(self, terms, n_terms, chunk):
+    def _bounce_sums(self, terms, n_terms, chunk, material, kind):
         """Per bounce: yield (its index, p0, p1, (n_terms, p1 - p0)): each pixel's sum
-        over all the pairs it blocks of ``terms(lc, td, w)``."""
-        for k, (geometry, n) in enumerate(self.bounce_geometry):
-            for p0, p1, sums in self._lane_sums(geometry, 1, n, terms, n_terms, chunk):
-                yield k, p0, p1, sums[..., 0]
+        over all the pairs it blocks of ``terms(lc, td, w)`` for ``material`` (``kind``
+        names the terms). Under a light they are kept for the next light (the pairs
+        are the light's map of directions, :attr:`TexelSum.bounce_memo
+        <mi_dsbrdf.inference.forward.TexelSum.bounce_memo>`)."""
+        for k, (geometry, first, counts) in enumerate(self.bounce_geometry):
+            pairs = self.texels.bounces[k].pairs
+            key = (kind, k, material.log_kappa.tobytes(), material.log_gamma.tobytes(),
+                   material.chromaticity.tobytes(), np.asarray(material.knots).tobytes())
+            rows = None if pairs is None else pairs.bounce_memo.get(key)
+            if rows is None:
+                rows = list(self._ragged_sums(geometry, first, counts, terms, n_terms, chunk))
+                if pairs is not None:
+                    memo = pairs.bounce_memo
+                    while len(memo) >= MEMO_MATERIALS:
+                        memo.pop(next(iter(memo)))
+                    memo[key] = rows
+            for p0, p1, sums in rows:
+                yield k, p0, p1, sums
 
     @functools.cached_property
     def unseen(self) -> np.ndarray:
@@ -118,8 +137,8 @@ class LobeSum:
         if h is not None:
             lit = dr.block_sum(self.highlight_geometry[2], h.per_pair).numpy() > 0
             seen[h.texels.reshape(-1)[lit]] = True
-        for b, (geometry, _) in zip(self.texels.bounces, self.bounce_geometry):   # seen through a surface's light
-            if dr.max(geometry[2])[0] > 0:
+        for b, (geometry, _, _) in zip(self.texels.bounces, self.bounce_geometry):   # seen through its light
+            if dr.width(geometry[2]) and dr.max(geometry[2])[0] > 0:
                 seen |= b.weights > 0
         return ~seen
 
@@ -195,6 +214,23 @@ class LobeSum:
             dr.eval(*sums)
             yield p0, p1, np.stack([a.numpy() for a in sums]).reshape(n_terms, p1 - p0, K)
 
+    @staticmethod
+    def _ragged_sums(geometry, first, counts, terms, n_terms, chunk):
+        """Yield pixel ranges [p0, p1) and each pixel's sum of ``terms(lc, td, w)``
+        over its ``counts`` lanes of ``geometry`` from lane ``first`` (P,), as
+        (n_terms, p1 - p0) float32: :meth:`_lane_sums` with a count a pixel."""
+        P = counts.size
+        for p0, p1 in pixel_ranges(P, max(1, int(np.ceil(counts.mean()))) if P else 1, chunk):
+            start, count = mi.UInt32(first[p0:p1]), mi.UInt32(counts[p0:p1])
+
+            def body(j, *acc):
+                values = terms(*(dr.gather(mi.Float, a, start + j) for a in geometry))
+                return (j + 1,) + tuple(a + v for a, v in zip(acc, values))
+            state = (dr.zeros(mi.UInt32, p1 - p0),) + tuple(dr.zeros(mi.Float, p1 - p0) for _ in range(n_terms))
+            sums = dr.while_loop(state, lambda j, *acc: j < count, body)[1:]
+            dr.eval(*sums)
+            yield p0, p1, np.stack([a.numpy() for a in sums]).reshape(n_terms, p1 - p0)
+
     def _channels(self, material, out):
         """Fill ``out`` (3, P, T) with weight * Eq. 4 per colour channel."""
         lk, lg, ch = self._scalars(material)
@@ -226,9 +262,10 @@ class LobeSum:
 
             def rgb(lc, td, w):
                 return [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
-            for k, p0, p1, b in self._bounce_sums(rgb, 3, VALUE_CHUNK):
-                m = self.texels.bounces[k].transport_term
-                out[:, p0:p1] += (b[:, :, None] * m[:, None, :]).astype(np.float32)
+            for k, p0, p1, b in self._bounce_sums(rgb, 3, VALUE_CHUNK, material, "rgb"):
+                m = self.texels.bounces[k].transport_term.astype(np.float32)
+                for c in range(3):                   # in float32, a channel at a time: no large temporaries
+                    out[c, p0:p1] += np.multiply.outer(b[c].astype(np.float32), m[c])
         return out
 
     def render(self, material, illumination) -> np.ndarray:
@@ -272,7 +309,7 @@ class LobeSum:
         for p0, p1, A in self._highlight_sums(terms, n_cols, JACOBIAN_CHUNK):
             flat = np.einsum("npk,pkc->ncp", A, L[h.texels[p0:p1]])          # A: (columns, pixels, K)
             sums[..., p0:p1] += flat.reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
-        for k, p0, p1, A in self._bounce_sums(terms, n_cols, JACOBIAN_CHUNK):     # A: (columns, pixels)
+        for k, p0, p1, A in self._bounce_sums(terms, n_cols, JACOBIAN_CHUNK, material, "jacobian"):
             rad = self.texels.bounces[k].radiance(L)                # (3,): the surface's, under L
             sums[..., p0:p1] += (A[:, None, :] * rad[None, :, None]).reshape(R, 1 + 2 * N_CONTROL, 3, p1 - p0)
         sums *= s
