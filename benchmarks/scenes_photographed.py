@@ -50,8 +50,7 @@ object but does not light it, which the tool does not model either; the
 difference to the ``path`` run is what leaving that light out costs
 (``..._<set>_direct.json``). With ``--bounce``, no recovery: how much of the
 path-traced image the forward model misses without the ground's light, and what
-one linear term per diffuse surface would recover (:func:`bounce_case`;
-``..._bounce_<set>.json``).
+its one-bounce term recovers (:func:`bounce_case`; ``..._bounce_<set>.json``).
 
     .venv/bin/python benchmarks/scenes_photographed.py --set validation --limit 4   # ~15 min
     .venv/bin/python benchmarks/scenes_photographed.py --set report                  # ~60 min
@@ -262,74 +261,49 @@ def cases(which, limit):
     return [(m, probes[i % len(probes)], o) for i, m in enumerate(materials) for o in OBJECTS]
 
 
-#: --bounce: the forward model's image side and map (texels), Mitsuba's spp, the
-#: ground points its light is averaged over
-BOUNCE_RES, BOUNCE_MAP, BOUNCE_SPP, BOUNCE_POINTS = 96, (32, 64), 1024, 512
+#: --bounce: the forward model's image side and map (texels), Mitsuba's spp
+BOUNCE_RES, BOUNCE_MAP, BOUNCE_SPP = 96, (32, 64), 1024
 
 
 def bounce_case(material, probe, obj, data) -> dict:
     """How much of a path-traced image the forward model misses by leaving out the
-    ground's light, and how much one term per diffuse surface would recover.
+    ground's light, and how much its one-bounce term (:mod:`mi_dsbrdf.inference.bounce`)
+    recovers.
 
     The object carries ``material``'s DSBRDF fit (the shipped library's: no
     material error), under the probe at :data:`BOUNCE_MAP` written in texel blocks
     (both renderers see one map). Relative L1 over the object's interior pixels of
-    the texel sum (2 x 2 directions a texel, shadow rays through the scene)
-    against Mitsuba's ``direct`` render (what the sum models), against its
-    ``path`` render (max depth :data:`MAX_DEPTH`), and of the texel sum plus a
-    one-bounce ground term against the ``path`` render. The term: the sum over
-    each pixel's pairs that the ground blocks, b (3, P), times the ground's
-    radiance R = albedo / pi * sum_t g_t L_t, with g_t = cos theta' x visibility x
-    solid angle averaged over :data:`BOUNCE_POINTS` ground points those pairs hit
-    (the object's shadow on the ground included); linear in the map, so the
-    illumination block would stay linear."""
-    import copy
-    import math
-
+    the texel sum (2 x 2 directions a texel, shadow rays through the scene), without
+    and with the ground's bounce, against Mitsuba's ``direct`` render (what the sum
+    without the bounce models) and its ``path`` render (max depth :data:`MAX_DEPTH`)."""
     import mitsuba as mi
 
     from mi_dsbrdf.evaluation.experiment import downsample, dsbrdf_bsdf
     from mi_dsbrdf.inference.forward import TexelSum
     from mi_dsbrdf.inference.images import read_image
-    from mi_dsbrdf.inference.latlong import latlong_directions, texel_blocks, texel_solid_angles
+    from mi_dsbrdf.inference.latlong import texel_blocks
+    from mi_dsbrdf.inference.lobes import LobeSum
     from mi_dsbrdf.inference.pixels import interior
     from mi_dsbrdf.model.model_file import shipped_model
-    H, W = BOUNCE_MAP
-    L = downsample(read_image(os.path.join(data, "envmaps", probe)), H, W).astype(np.float32)
-    bsdf = dsbrdf_bsdf(shipped_model().library_material(material))
+    L = downsample(read_image(os.path.join(data, "envmaps", probe)), *BOUNCE_MAP).astype(np.float32)
+    fit = shipped_model().library_material(material)
+    bsdf = dsbrdf_bsdf(fit)
     light = {"type": "envmap", "bitmap": mi.Bitmap(texel_blocks(L))}
-
-    def view(ground):
-        s = mi.load_dict(scene_dict(obj, bsdf, light, {"type": "direct", "hide_emitters": True}, ground,
+    scene = mi.load_dict(scene_dict(obj, bsdf, light, {"type": "direct", "hide_emitters": True}, True,
                                     res=BOUNCE_RES))
-        return s, TexelSum(s, [x for x in s.shapes() if x.id() == "object"][0], (H, W), visibility=True, samples=2)
-    scene, ts = view(True)
-    _, alone = view(False)
-    plain = ts.render(L.reshape(-1, 3))
-    blocked = copy.copy(ts)                        # the pairs the ground blocks (a copy of our own)
-    blocked.visibility = alone.visibility & ~ts.visibility
-    b = blocked.transport().sum(axis=2)            # (3, P)
-    pix, pair = np.nonzero(blocked.visibility)
-    pick = np.random.default_rng(0).choice(pix.size, size=min(BOUNCE_POINTS, pix.size), replace=False)
-    o, d = ts.positions[:, pix[pick]].T, ts.directions[pair[pick]]
-    hit = scene.ray_intersect(mi.Ray3f(mi.Point3f(*(o + 1e-3 * d).T.astype(np.float32)),
-                                       mi.Vector3f(*d.T.astype(np.float32))))
-    y, n = np.array(hit.p).T, np.array(hit.n).T
-    dirs = latlong_directions(H, W).reshape(-1, 3)
-    ys, ns, ds = np.repeat(y, len(dirs), 0), np.repeat(n, len(dirs), 0), np.tile(dirs, (len(y), 1))
-    lit = ~np.array(scene.ray_test(mi.Ray3f(mi.Point3f(*(ys + 1e-3 * ns).T.astype(np.float32)),
-                                            mi.Vector3f(*ds.T.astype(np.float32)))))
-    g = (np.maximum((ds * ns).sum(axis=1), 0.0) * lit).reshape(len(y), -1).mean(axis=0) * \
-        texel_solid_angles(H, W).reshape(-1)
-    radiance = np.asarray(GROUND_ALBEDO) / math.pi * (g @ L.reshape(-1, 3))
-    bounced = plain + b.T * radiance
+    shape = [x for x in scene.shapes() if x.id() == "object"][0]
+    others = tuple(x for x in scene.shapes() if x.id() != "object")
+    images = {}
+    for name, surfaces in (("sum", ()), ("sum_bounce", others)):
+        ts = TexelSum(scene, shape, BOUNCE_MAP, visibility=True, samples=2, surfaces=surfaces)
+        images[name] = LobeSum(ts).render(fit, L.reshape(-1, 3))
     keep = interior(ts.mask).reshape(-1)[ts.pixels]
     out = {"case": "%s-%s-%s" % (material, os.path.splitext(os.path.basename(probe))[0], obj),
-           "ground_pairs": float(blocked.visibility.mean())}
+           "ground_pairs": float(ts.bounces[0].blocked.mean())}
     for name, integrator in (("direct", {"type": "direct"}), ("path", {"type": "path", "max_depth": MAX_DEPTH})):
         s = mi.load_dict(scene_dict(obj, bsdf, light, integrator, True, res=BOUNCE_RES))
         photo = np.array(mi.render(s, spp=BOUNCE_SPP, seed=2), dtype=np.float64).reshape(-1, 3)[ts.pixels][keep]
-        for model, image in (("sum", plain), ("sum_bounce", bounced)):
+        for model, image in images.items():
             out["%s_vs_%s" % (model, name)] = float(np.abs(image[keep] - photo).sum() / np.abs(photo).sum())
     return out
 

@@ -78,6 +78,40 @@ class Bounce:
                                    pairs=None if self.pairs is None else self.pairs.subset(rows))
 
 
+def map_bounces(scene, surfaces, which, positions, normals, directions, solid_angles, per_texel) -> tuple:
+    """The :class:`Bounce` of each of ``surfaces`` (shapes) that blocks a pair of a
+    map's view: ``which`` (P, n) int8, the index of the surface each pair's shadow ray
+    meets (-1: none; :func:`~mi_dsbrdf.inference.rays.shadow_test`); the pixels'
+    surface ``positions`` and geometric ``normals`` (3, P); the map's world
+    ``directions`` (n, 3) with their ``solid_angles`` (n,), ``per_texel`` a texel."""
+    bounces = []
+    n = which.shape[1]
+    for k, shape in enumerate(surfaces):
+        blocked = which == k
+        lanes = np.flatnonzero(blocked)
+        if lanes.size == 0:
+            continue
+        lanes = lanes[np.linspace(0, lanes.size - 1, min(POINTS, lanes.size)).round().astype(np.int64)]
+        pix, pair = lanes // n, lanes % n
+        points = surface_points(scene, positions[:, pix].T, normals[:, pix].T, directions[pair])
+        weights = surface_weights(scene, points, light_directions=directions, solid_angles=solid_angles,
+                                  per_texel=per_texel)
+        bounces.append(Bounce(shape.id() or "surface %d" % k, diffuse_albedo(shape), blocked, weights,
+                              points=points))
+    return tuple(bounces)
+
+
+def light_bounces(scene, view, position=None, direction=None) -> tuple:
+    """The bounces of ``view`` (the light's map of :data:`DIRECTIONS` over the same
+    pixels, whose :func:`map_bounces` find the surfaces) under a point light at
+    ``position``, else a directional light along ``direction`` (towards it) of unit
+    irradiance."""
+    kw = ({"position": position} if position is not None
+          else {"light_directions": np.asarray(direction).reshape(1, 3), "solid_angles": np.ones(1)})
+    return tuple(dataclasses.replace(b, pairs=view, weights=surface_weights(scene, b.points, **kw))
+                 for b in view.bounces)
+
+
 def diffuse_albedo(shape):
     """(3,) the constant reflectance of ``shape``'s BSDF when it is ``diffuse``
     with one; else None (a texture, another BSDF)."""

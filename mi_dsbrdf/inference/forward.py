@@ -45,8 +45,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.brdf.angles import pair_geometry
-from mi_dsbrdf.inference.bounce import (DIRECTIONS as BOUNCE_DIRECTIONS, POINTS as BOUNCE_POINTS, Bounce,
-                                        compact_pairs, diffuse_albedo, surface_points, surface_weights)
+from mi_dsbrdf.inference.bounce import DIRECTIONS as BOUNCE_DIRECTIONS, compact_pairs, light_bounces, map_bounces
 from mi_dsbrdf.inference.highlights import TEXEL_SIDE, HighlightPairs
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_directions
 from mi_dsbrdf.inference.rays import FootprintRays, centre_hits, shadow_test
@@ -288,30 +287,12 @@ class TexelSum:
             points, normals, frames = self.positions, np.array(self.si.n, dtype=np.float64), self.frames
         vis, which = shadow_test(scene, points, normals, frames, self.directions, self.light_position,
                                  self.n_pixels, self.n_directions, self._chunks(), self.ray_lanes, self._surfaces)
-        if self.ray_lanes:              # a light: the surfaces the pixels see, lit by it
-            if not self._surfaces:
-                return vis, ()
-            aux = self.bounce_view
-            if self.light_position is not None:
-                kw = {"position": self.light_position}
-            else:                       # a directional light: its one direction, irradiance 1
-                kw = {"light_directions": self.directions[:1], "solid_angles": np.ones(1)}
-            return vis, tuple(dataclasses.replace(b, pairs=aux, weights=surface_weights(scene, b.points, **kw))
-                              for b in aux.bounces)
-        bounces = []
-        for k, shape in enumerate(self._surfaces):
-            blocked = which == k
-            lanes = np.flatnonzero(blocked)
-            if lanes.size == 0:
-                continue
-            lanes = lanes[np.linspace(0, lanes.size - 1, min(BOUNCE_POINTS, lanes.size)).round().astype(np.int64)]
-            pix, pair = lanes // self.n_directions, lanes % self.n_directions
-            points = surface_points(scene, self.positions[:, pix].T, normals[:, pix].T, self.directions[pair])
-            weights = surface_weights(scene, points, light_directions=self.directions,
-                                      solid_angles=self.solid_angles, per_texel=self.per_texel)
-            bounces.append(Bounce(shape.id() or "surface %d" % k, diffuse_albedo(shape), blocked, weights,
-                                  points=points))
-        return vis, tuple(bounces)
+        if not self._surfaces:
+            return vis, ()
+        if self.ray_lanes:              # a light: the surfaces the pixels see, from its map of directions
+            return vis, light_bounces(scene, self.bounce_view, self.light_position, self.directions[0])
+        return vis, map_bounces(scene, self._surfaces, which, self.positions, normals, self.directions,
+                                self.solid_angles, self.per_texel)
 
     @functools.cached_property
     def bounce_view(self) -> "TexelSum":
