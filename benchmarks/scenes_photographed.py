@@ -44,11 +44,7 @@ case i is material i under probe i mod (number of probes), on each object;
 ``--limit`` the first N materials. Needs ../shared/data. One process, the cases in
 turn; a case's result is kept under out/scenes_photographed/<set>/ and reused
 (``--fresh`` reruns). Prints the table and writes
-benchmarks/results/scenes_photographed_<set>.json. With ``--photo direct`` the
-photographs are rendered by the ``direct`` integrator: the ground shadows the
-object but does not light it, which the tool does not model either; the
-difference to the ``path`` run is what leaving that light out costs
-(``..._<set>_direct.json``). With ``--bounce``, no recovery: how much of the
+benchmarks/results/scenes_photographed_<set>.json. With ``--bounce``, no recovery: how much of the
 path-traced image the forward model misses without the ground's light, and what
 its one-bounce term recovers (:func:`bounce_case`; ``..._bounce_<set>.json``).
 
@@ -69,6 +65,7 @@ from mi_dsbrdf.evaluation.benchmark_cases import (CACHE, DATA, OUT, REPORT_MATER
 #: the photograph: image side (px), path depth, samples per pixel, photons at the
 #: object's mean pixel, and the quantile of the object's pixels the camera clips at
 RES, MAX_DEPTH, PHOTO_SPP, PHOTONS, WHITE_QUANTILE = 256, 5, 256, 2000, 0.99
+PATH = {"type": "path", "max_depth": MAX_DEPTH}
 #: the torus turned about x (degrees) to stand 60 degrees from flat, facing the camera;
 #: the ground's height under each object (it stands on it) and its albedo
 TORUS_TILT = -30.0
@@ -175,10 +172,9 @@ def map_scores(recovered, seen, truth) -> dict:
             "map_cosine": scale_invariant_log_error(recovered, truth, seen, "cosine")}
 
 
-def map_case(material, probe, obj, photo, data, clean=None) -> dict:
-    """One map case and its clean twin, scored (module doc); ``photo``: the
-    photograph's integrator (``path`` or ``direct``); ``clean``: the clean twin's
-    scores when they are known (they do not depend on ``photo``)."""
+def map_case(material, probe, obj, data, clean=None) -> dict:
+    """One map case and its clean twin, scored (module doc); ``clean``: the clean
+    twin's scores when they are known (they do not depend on the scene's other shapes)."""
     from mi_dsbrdf.brdf.measured import MeasuredBRDF
     from mi_dsbrdf.evaluation.experiment import downsample
     from mi_dsbrdf.inference.images import read_image
@@ -194,7 +190,7 @@ def map_case(material, probe, obj, photo, data, clean=None) -> dict:
     out = {"case": name, "material": material, "probe": probe, "object": obj}
     if clean is not None:
         out["clean"] = clean
-    for kind, ground, integrator in (("scene", True, photo_integrator(photo)), ("clean", False, {"type": "direct"})):
+    for kind, ground, integrator in (("scene", True, PATH), ("clean", False, {"type": "direct"})):
         if kind in out:
             continue
         img, _ = photograph(scene_dict(obj, truth_bsdf, light, integrator, ground), name, kind == "clean")
@@ -215,11 +211,7 @@ def map_case(material, probe, obj, photo, data, clean=None) -> dict:
     return out
 
 
-def photo_integrator(photo) -> dict:
-    return {"type": "path", "max_depth": MAX_DEPTH} if photo == "path" else {"type": "direct"}
-
-
-def point_case(material, photo, data, clean=None) -> dict:
+def point_case(material, data, clean=None) -> dict:
     """The point light with a blocker, and its clean twin (module doc; ``clean`` as
     :func:`map_case`'s)."""
     from mi_dsbrdf.evaluation.experiment import light_at
@@ -238,7 +230,7 @@ def point_case(material, photo, data, clean=None) -> dict:
     out = {"case": name, "material": material, "object": "sphere"}
     if clean is not None:
         out["clean"] = clean
-    for kind, ground, integrator in (("scene", True, photo_integrator(photo)), ("clean", False, {"type": "direct"})):
+    for kind, ground, integrator in (("scene", True, PATH), ("clean", False, {"type": "direct"})):
         if kind in out:
             continue
         stop = blocker if kind == "scene" else None
@@ -300,7 +292,7 @@ def bounce_case(material, probe, obj, data) -> dict:
     keep = interior(ts.mask).reshape(-1)[ts.pixels]
     out = {"case": "%s-%s-%s" % (material, os.path.splitext(os.path.basename(probe))[0], obj),
            "ground_pairs": float(ts.bounces[0].blocked.mean())}
-    for name, integrator in (("direct", {"type": "direct"}), ("path", {"type": "path", "max_depth": MAX_DEPTH})):
+    for name, integrator in (("direct", {"type": "direct"}), ("path", PATH)):
         s = mi.load_dict(scene_dict(obj, bsdf, light, integrator, True, res=BOUNCE_RES))
         photo = np.array(mi.render(s, spp=BOUNCE_SPP, seed=2), dtype=np.float64).reshape(-1, 3)[ts.pixels][keep]
         for model, image in images.items():
@@ -358,9 +350,6 @@ def main(argv=None):
     ap.add_argument("--set", choices=("validation", "report"), default="validation")
     ap.add_argument("--limit", type=int, default=0, help="the first N materials (0: all)")
     ap.add_argument("--fresh", action="store_true", help="rerun cases whose results are kept")
-    ap.add_argument("--photo", choices=("path", "direct"), default="path",
-                    help="the photographs' integrator: path (the ground lights the object) or direct (it only "
-                         "shadows it: what ignoring its light costs is the difference)")
     ap.add_argument("--bounce", action="store_true",
                     help="no recovery: the forward model against Mitsuba's direct and path renders, with and "
                          "without a one-bounce ground term (bounce_case), on the set's cases")
@@ -387,7 +376,7 @@ def main(argv=None):
         with open(os.path.join(RESULTS, "scenes_photographed_bounce_%s.json" % args.set), "w") as f:
             json.dump(summary, f, indent=1)
         return
-    tag = args.set + ("" if args.photo == "path" else "_direct") + ("_" + args.tag if args.tag else "")
+    tag = args.set + ("_" + args.tag if args.tag else "")
     folder = os.path.join(OUT, "scenes_photographed", tag)
     os.makedirs(folder, exist_ok=True)
 
@@ -397,12 +386,12 @@ def main(argv=None):
             with open(path) as f:
                 return json.load(f)
         t0 = time.perf_counter()
-        twin = os.path.join(OUT, "scenes_photographed", args.clean_from or args.set, name + ".json")
         clean = None
-        if (args.clean_from or args.photo != "path") and os.path.exists(twin):
+        twin = args.clean_from and os.path.join(OUT, "scenes_photographed", args.clean_from, name + ".json")
+        if twin and os.path.exists(twin):
             with open(twin) as f:
                 clean = json.load(f)["clean"]
-        r = fn(*a, args.photo, args.data, clean)
+        r = fn(*a, args.data, clean)
         with open(path, "w") as f:
             json.dump(r, f, indent=1)
         print("%-48s %.0f s: relit scene %s clean %s" % (
@@ -414,9 +403,8 @@ def main(argv=None):
             for m, p, o in cases(args.set, args.limit)]
     materials = VALIDATION_MATERIALS if args.set == "validation" else REPORT_MATERIALS
     point = run("%s-point-blocker" % materials[0], point_case, materials[0])
-    command = "python benchmarks/scenes_photographed.py --set %s%s%s%s" % (
-        args.set, " --limit %d" % args.limit if args.limit else "", "" if args.photo == "path" else " --photo direct",
-        " --tag " + args.tag if args.tag else "")
+    command = "python benchmarks/scenes_photographed.py --set %s%s%s" % (
+        args.set, " --limit %d" % args.limit if args.limit else "", " --tag " + args.tag if args.tag else "")
     s = summarise(rows, point, command)
     print(table(s))
     os.makedirs(RESULTS, exist_ok=True)
