@@ -172,7 +172,7 @@ def map_scores(recovered, seen, truth) -> dict:
             "map_cosine": scale_invariant_log_error(recovered, truth, seen, "cosine")}
 
 
-def map_case(material, probe, obj, data, clean=None) -> dict:
+def map_case(material, probe, obj, data, clean=None, res=RES) -> dict:
     """One map case and its clean twin, scored (module doc); ``clean``: the clean
     twin's scores when they are known (they do not depend on the scene's other shapes)."""
     from mi_dsbrdf.brdf.measured import MeasuredBRDF
@@ -193,9 +193,9 @@ def map_case(material, probe, obj, data, clean=None) -> dict:
     for kind, ground, integrator in (("scene", True, PATH), ("clean", False, {"type": "direct"})):
         if kind in out:
             continue
-        img, _ = photograph(scene_dict(obj, truth_bsdf, light, integrator, ground), name, kind == "clean")
-        result, seconds = recover_case(scene_dict(obj, {"type": "dsbrdf"}, light, {"type": "direct"}, ground),
-                                       img.astype(np.float32), model)
+        img, _ = photograph(scene_dict(obj, truth_bsdf, light, integrator, ground, res=res), name, kind == "clean")
+        result, seconds = recover_case(scene_dict(obj, {"type": "dsbrdf"}, light, {"type": "direct"}, ground,
+                                                  res=res), img.astype(np.float32), model)
         rec = result.illumination
         truth = downsample(probe_map, *rec.shape[:2])
         row = {"seconds": seconds, "relit": relit(result.material, truth_bsdf, probe, data),
@@ -211,7 +211,7 @@ def map_case(material, probe, obj, data, clean=None) -> dict:
     return out
 
 
-def point_case(material, data, clean=None) -> dict:
+def point_case(material, data, clean=None, res=RES) -> dict:
     """The point light with a blocker, and its clean twin (module doc; ``clean`` as
     :func:`map_case`'s)."""
     from mi_dsbrdf.evaluation.experiment import light_at
@@ -234,10 +234,10 @@ def point_case(material, data, clean=None) -> dict:
         if kind in out:
             continue
         stop = blocker if kind == "scene" else None
-        img, mask = photograph(scene_dict("sphere", truth_bsdf, light, integrator, ground, stop), name,
+        img, mask = photograph(scene_dict("sphere", truth_bsdf, light, integrator, ground, stop, res), name,
                                kind == "clean")
         result, seconds = recover_case(scene_dict("sphere", {"type": "dsbrdf"}, light, {"type": "direct"}, ground,
-                                                  stop), img.astype(np.float32), model)
+                                                  stop, res), img.astype(np.float32), model)
         out[kind] = {"seconds": seconds, "direction_error_deg": direction_error_deg(result.light["direction"], d),
                      "needs": result.log["needs"], "residual": result.log["residual"]}
         if kind == "scene":
@@ -356,6 +356,7 @@ def main(argv=None):
     ap.add_argument("--clean-from", metavar="FOLDER",
                     help="take the clean twins' results from out/scenes_photographed/FOLDER (they do not depend "
                          "on the scene's other shapes)")
+    ap.add_argument("--res", type=int, default=RES, help="the photographs' side in pixels (default %(default)s)")
     ap.add_argument("--tag", default="", help="suffix of the result folder and the summary's name")
     ap.add_argument("--data", default=DATA)
     args = ap.parse_args(argv)
@@ -376,7 +377,7 @@ def main(argv=None):
         with open(os.path.join(RESULTS, "scenes_photographed_bounce_%s.json" % args.set), "w") as f:
             json.dump(summary, f, indent=1)
         return
-    tag = args.set + ("_" + args.tag if args.tag else "")
+    tag = args.set + ("" if args.res == RES else "_%d" % args.res) + ("_" + args.tag if args.tag else "")
     folder = os.path.join(OUT, "scenes_photographed", tag)
     os.makedirs(folder, exist_ok=True)
 
@@ -391,7 +392,7 @@ def main(argv=None):
         if twin and os.path.exists(twin):
             with open(twin) as f:
                 clean = json.load(f)["clean"]
-        r = fn(*a, args.data, clean)
+        r = fn(*a, args.data, clean, args.res)
         with open(path, "w") as f:
             json.dump(r, f, indent=1)
         print("%-48s %.0f s: relit scene %s clean %s" % (
@@ -403,8 +404,9 @@ def main(argv=None):
             for m, p, o in cases(args.set, args.limit)]
     materials = VALIDATION_MATERIALS if args.set == "validation" else REPORT_MATERIALS
     point = run("%s-point-blocker" % materials[0], point_case, materials[0])
-    command = "python benchmarks/scenes_photographed.py --set %s%s%s" % (
-        args.set, " --limit %d" % args.limit if args.limit else "", " --tag " + args.tag if args.tag else "")
+    command = "python benchmarks/scenes_photographed.py --set %s%s%s%s" % (
+        args.set, " --limit %d" % args.limit if args.limit else "", "" if args.res == RES else " --res %d" % args.res,
+        " --tag " + args.tag if args.tag else "")
     s = summarise(rows, point, command)
     print(table(s))
     os.makedirs(RESULTS, exist_ok=True)
