@@ -16,11 +16,12 @@ ground plane under a light probe at full resolution:
   at a white level (:data:`WHITE_QUANTILE` of the object's pixels' brightest
   channel), which the tool is not told;
 * the scene given to :func:`mi_dsbrdf.recover`: the same camera, the object with a
-  ``dsbrdf``, the ground with its diffuse BSDF, an envmap; the default preset.
+  ``dsbrdf``, the ground with its diffuse BSDF (its shadows and its light are
+  modelled, :mod:`mi_dsbrdf.inference.bounce`), an envmap; the default preset.
 
 Its *clean* twin: the same object alone under the same probe, rendered by the
-``direct`` integrator (the single bounce the tool models), no noise, no clipping,
-recovered alike. Scores, for both:
+``direct`` integrator (with nothing else in the scene, what the tool models
+exactly), no noise, no clipping, recovered alike. Scores, for both:
 
 * ``brdf_eq20_paper``, ``brdf_eq20_cosine``: Eq. 20 on the MERL grid in the paper's
   convention, log(f + 1e-6), and the graphics-fitting one, log(1 + f cos theta_i);
@@ -44,7 +45,8 @@ case i is material i under probe i mod (number of probes), on each object;
 ``--limit`` the first N materials. Needs ../shared/data. One process, the cases in
 turn; a case's result is kept under out/scenes_photographed/<set>/ and reused
 (``--fresh`` reruns). Prints the table and writes
-benchmarks/results/scenes_photographed_<set>.json. With ``--bounce``, no recovery: how much of the
+benchmarks/results/scenes_photographed_<set>.json (``--res`` another image side:
+``..._<set>_<res>.json``). With ``--bounce``, no recovery: how much of the
 path-traced image the forward model misses without the ground's light, and what
 its one-bounce term recovers (:func:`bounce_case`; ``..._bounce_<set>.json``).
 
