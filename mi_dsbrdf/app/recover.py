@@ -93,8 +93,9 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     film = scene.sensors()[0].film().crop_size()
     envmap, visibility = memory_needs(scene)
     obj = dsbrdf_object(scene)
-    surfaces = len(bounce_surfaces(scene, obj)[0]) if visibility[0] else 0
-    check_memory(cfg, WorkingGrid.of(film, cfg.working_pixels), envmap, visibility[0], surfaces=surfaces)
+    bounce = bounce_surfaces(scene, obj)
+    check_memory(cfg, WorkingGrid.of(film, cfg.working_pixels), envmap, visibility[0],
+                 surfaces=len(bounce[0]) if visibility[0] else 0)
     obs, user_mask = load_inputs(image, mask, srgb)
     h, w = obs.shape[:2]
     if (w, h) != (int(film[0]), int(film[1])):
@@ -105,7 +106,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
     grid, on_object = working_grid(scene, obj, user_mask, cfg.working_pixels)
     work = grid.mean(obs)
     needs = decide(scene, work, None if user_mask is None else grid.all(user_mask), model.basis.n_lobes,
-                   model.basis.n_bases, visibility)
+                   model.basis.n_bases, visibility, bounce)
     ts = TexelSum(working_scene(scene, grid), obj, cfg.map_size if needs.envmap_block else (1, 1),
                   visibility=needs.visibility, to_world=envmap_rotation(scene) if needs.envmap_block else None,
                   samples=cfg.texel_samples if needs.envmap_block else 1,     # the re-render as inference saw it

@@ -26,6 +26,7 @@ modelled (:mod:`~mi_dsbrdf.inference.scene_needs` says which).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import drjit as dr
@@ -50,10 +51,9 @@ class Bounce:
     blocked : (P, n) bool: the pixel-direction pairs it blocks, of ``pairs``
     weights : (n_texels,) g_s of the module doc under the view's light, summed over
         each texel's directions
-    pairs : None: the view's own pairs (a map's); else the map view (a
-        :class:`~mi_dsbrdf.inference.forward.TexelSum` over the same pixels, lit
-        from :data:`DIRECTIONS`) whose pairs ``blocked`` indexes: a point or a
-        directional light's rays see the light alone, not the surface
+    pairs : None: the view's own pairs (a map's); else the :class:`SurfacePairs`
+        whose pairs ``blocked`` indexes: a point or a directional light's rays see the
+        light alone, not the surface
     points : (points (N, 3), normals (N, 3)): the surface's points the weights
         average over (:func:`surface_points`), the same for every light
     """
@@ -73,9 +73,33 @@ class Bounce:
         """(3,) R_s under ``illumination`` (n_texels, 3)."""
         return (self.transport_term * np.asarray(illumination, dtype=np.float64).reshape(-1, 3).T).sum(axis=1)
 
-    def subset(self, rows) -> "Bounce":
-        return dataclasses.replace(self, blocked=self.blocked[rows],
-                                   pairs=None if self.pairs is None else self.pairs.subset(rows))
+    def subset(self, rows, pairs=None) -> "Bounce":
+        """The bounce on the pixels ``rows``; ``pairs``: their :class:`SurfacePairs` (a
+        light's), or None (a map's own pairs)."""
+        return dataclasses.replace(self, blocked=self.blocked[rows], pairs=pairs)
+
+
+class SurfacePairs:
+    """Under a point or a directional light: the pixels of a view lit from the
+    centres of a :data:`DIRECTIONS` map (``view``, a
+    :class:`~mi_dsbrdf.inference.forward.TexelSum` with shadow rays), whose blocked
+    pairs find the surfaces each pixel sees. Made once a view, shared by every
+    light the view takes; what it derives is kept here."""
+
+    def __init__(self, view):
+        self.view = view
+        #: sums over the pairs already made, for a few materials
+        #: (:meth:`LobeSum._bounce_sums <mi_dsbrdf.inference.lobes.LobeSum._bounce_sums>`):
+        #: they do not depend on the light, which a light search moves
+        self.memo = {}
+
+    @functools.cached_property
+    def geometry(self) -> list:
+        """:func:`compact_pairs` of the pairs each of ``view.bounces`` blocks."""
+        return [compact_pairs(self.view.pair_geometry(b.blocked), b.blocked) for b in self.view.bounces]
+
+    def subset(self, rows) -> "SurfacePairs":
+        return SurfacePairs(self.view.subset(rows))
 
 
 def map_bounces(scene, surfaces, which, positions, normals, directions, solid_angles, per_texel) -> tuple:
@@ -91,7 +115,7 @@ def map_bounces(scene, surfaces, which, positions, normals, directions, solid_an
         lanes = np.flatnonzero(blocked)
         if lanes.size == 0:
             continue
-        lanes = lanes[np.linspace(0, lanes.size - 1, min(POINTS, lanes.size)).round().astype(np.int64)]
+        lanes = lanes[np.linspace(0, lanes.size - 1, min(POINTS, lanes.size)).round().astype(np.int64)]   # evenly
         pix, pair = lanes // n, lanes % n
         points = surface_points(scene, positions[:, pix].T, normals[:, pix].T, directions[pair])
         weights = surface_weights(scene, points, light_directions=directions, solid_angles=solid_angles,
@@ -101,15 +125,14 @@ def map_bounces(scene, surfaces, which, positions, normals, directions, solid_an
     return tuple(bounces)
 
 
-def light_bounces(scene, view, position=None, direction=None) -> tuple:
-    """The bounces of ``view`` (the light's map of :data:`DIRECTIONS` over the same
-    pixels, whose :func:`map_bounces` find the surfaces) under a point light at
-    ``position``, else a directional light along ``direction`` (towards it) of unit
-    irradiance."""
+def light_bounces(scene, pairs, position=None, direction=None) -> tuple:
+    """The bounces of :class:`SurfacePairs` ``pairs`` (whose view's :func:`map_bounces`
+    find the surfaces) under a point light at ``position``, else a directional light
+    along ``direction`` (towards it) of unit irradiance."""
     kw = ({"position": position} if position is not None
           else {"light_directions": np.asarray(direction).reshape(1, 3), "solid_angles": np.ones(1)})
-    return tuple(dataclasses.replace(b, pairs=view, weights=surface_weights(scene, b.points, **kw))
-                 for b in view.bounces)
+    return tuple(dataclasses.replace(b, pairs=pairs, weights=surface_weights(scene, b.points, **kw))
+                 for b in pairs.view.bounces)
 
 
 def diffuse_albedo(shape):
@@ -125,21 +148,17 @@ def diffuse_albedo(shape):
     return np.resize(rho, 3) if rho.size in (1, 3) else None
 
 
-def surface_points(scene, origins, normals, directions, points=POINTS) -> tuple:
-    """(points (n, 3), normals (n, 3) facing the object) of the surface that the rays
+def surface_points(scene, origins, normals, directions) -> tuple:
+    """(points (N, 3), normals (N, 3) facing the object) of the surface that the rays
     from the object's points ``origins`` (N, 3) with geometric ``normals`` (N, 3)
-    along ``directions`` (N, 3) meet: a sample of the pairs it blocks, at most
-    ``points`` of them, evenly spread over them."""
-    n = min(points, origins.shape[0])
-    pick = np.linspace(0, origins.shape[0] - 1, n).round().astype(np.int64)
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.p = mi.Point3f(*origins[pick].T.astype(np.float32))
-    si.n = mi.Normal3f(*normals[pick].T.astype(np.float32))
-    d = directions[pick]
-    hit = scene.ray_intersect(si.spawn_ray(mi.Vector3f(*d.T.astype(np.float32))))
+    along ``directions`` (N, 3) meet (a sample of the pairs it blocks)."""
+    si = dr.zeros(mi.SurfaceInteraction3f, origins.shape[0])
+    si.p = mi.Point3f(*origins.T.astype(np.float32))
+    si.n = mi.Normal3f(*normals.T.astype(np.float32))
+    hit = scene.ray_intersect(si.spawn_ray(mi.Vector3f(*directions.T.astype(np.float32))))
     y = np.array(hit.p, dtype=np.float64).T
     nrm = np.array(hit.n, dtype=np.float64).T
-    nrm *= np.where((nrm * d).sum(axis=1) > 0, -1.0, 1.0)[:, None]          # the side the object sees
+    nrm *= np.where((nrm * directions).sum(axis=1) > 0, -1.0, 1.0)[:, None]          # the side the object sees
     return y, nrm
 
 
@@ -183,17 +202,6 @@ def _unblocked(scene, points, normals, directions, distance=None) -> np.ndarray:
     else:
         ray = si.spawn_ray_to(si.p + d * mi.Float(np.asarray(distance, dtype=np.float32)))
     return ~np.array(scene.ray_test(ray), dtype=bool)
-
-
-def shape_index(pi, shapes) -> np.ndarray:
-    """(N,) int8: the index in ``shapes`` of the shape each preliminary intersection
-    ``pi`` meets, -1 for none of them (or no hit)."""
-    hit = np.array(pi.is_valid(), dtype=bool)
-    ptr = np.array(dr.reinterpret_array(mi.UInt32, pi.shape))
-    out = np.full(hit.shape, -1, dtype=np.int8)
-    for i, shape in enumerate(shapes):
-        out[hit & (ptr == np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))] = i
-    return out
 
 
 def compact_pairs(geometry, blocked) -> tuple:

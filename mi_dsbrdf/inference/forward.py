@@ -37,7 +37,6 @@ With the reflectance fixed, the image is linear in L: I = T L, and
 from __future__ import annotations
 
 import copy
-import dataclasses
 import functools
 
 import drjit as dr
@@ -45,7 +44,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_dsbrdf.brdf.angles import pair_geometry
-from mi_dsbrdf.inference.bounce import DIRECTIONS as BOUNCE_DIRECTIONS, compact_pairs, light_bounces, map_bounces
+from mi_dsbrdf.inference.bounce import DIRECTIONS as BOUNCE_DIRECTIONS, SurfacePairs, light_bounces, map_bounces
 from mi_dsbrdf.inference.highlights import TEXEL_SIDE, HighlightPairs
 from mi_dsbrdf.inference.latlong import latlong_directions, texel_directions
 from mi_dsbrdf.inference.rays import FootprintRays, centre_hits, shadow_test
@@ -164,7 +163,7 @@ class TexelSum:
         times its share (N,)."""
         rays = self.footprint_rays       # traced once, shared by every light of this view
         if self._surfaces:
-            self.bounce_view             # so is the map that finds the surfaces, and its geometry
+            self.bounce_view             # so are the pairs that find the surfaces
         out = copy.copy(self)
         out._light(*light(rays), position, per_texel=rays.side ** 2, ray_lanes=True)
         return out
@@ -198,8 +197,6 @@ class TexelSum:
         # and solid angle (times the ray's share of its pixel); a map's are pixel x direction
         self.ray_lanes = ray_lanes
         self.highlights = None              # a map's (_map) or none
-        for key in ("bounce_pair_geometry", "bounce_memo"):          # the last light's
-            self.__dict__.pop(key, None)
         self.visibility, self.bounces = self._trace_visibility(self._scene) if self._trace else (None, ())
 
     def subset(self, rows) -> "TexelSum":
@@ -217,11 +214,7 @@ class TexelSum:
             sub.footprint_rays = self.footprint_rays.subset(rows)
         if "bounce_view" in self.__dict__:
             sub.bounce_view = self.bounce_view.subset(rows)
-        sub.bounces = tuple(b.subset(rows) if b.pairs is None
-                            else dataclasses.replace(b, blocked=b.blocked[rows], pairs=sub.bounce_view)
-                            for b in self.bounces)
-        for key in ("bounce_memo", "bounce_pair_geometry"):        # its pixels' own, made anew
-            sub.__dict__.pop(key, None)
+        sub.bounces = tuple(b.subset(rows, None if b.pairs is None else sub.bounce_view) for b in self.bounces)
         if self.ray_lanes:
             lanes = (rows[:, None] * self.per_texel + np.arange(self.per_texel)).reshape(-1)
             sub.directions, sub.solid_angles = self.directions[lanes], self.solid_angles[lanes]
@@ -295,26 +288,12 @@ class TexelSum:
                                 self.solid_angles, self.per_texel)
 
     @functools.cached_property
-    def bounce_view(self) -> "TexelSum":
+    def bounce_view(self) -> SurfacePairs:
         """This view's pixels lit from the centres of a
         :data:`~mi_dsbrdf.inference.bounce.DIRECTIONS` map, shadow rays traced: the
         pairs in which a point or directional light's view sees the other surfaces
         (traced on first use, shared by every light of the view)."""
-        return self.with_map_size(BOUNCE_DIRECTIONS)
-
-    @functools.cached_property
-    def bounce_memo(self) -> dict:
-        """Sums over the pairs of :attr:`bounces` already made, for a few materials
-        (:meth:`LobeSum._bounce_sums <mi_dsbrdf.inference.lobes.LobeSum._bounce_sums>`):
-        under a light they do not depend on the light, which a light search moves."""
-        return {}
-
-    @functools.cached_property
-    def bounce_pair_geometry(self) -> list:
-        """:func:`~mi_dsbrdf.inference.bounce.compact_pairs` of the pairs each of
-        ``bounces`` blocks (computed on first use; a light's views share their
-        :attr:`bounce_view`'s)."""
-        return [compact_pairs(self.pair_geometry(b.blocked), b.blocked) for b in self.bounces]
+        return SurfacePairs(self.with_map_size(BOUNCE_DIRECTIONS))
 
     def _weights(self, si, wo, light, t0, t1, mask=None):
         """BSDF * cosine * solid angle (* visibility) per lane, as a Color3f
@@ -361,7 +340,7 @@ class TexelSum:
         """Yield (P,) Color3f: each pixel's sum of BSDF * cosine * solid angle over the
         pairs ``bounce`` blocks, a chunk of directions at a time (with whatever AD
         graph the BSDF parameters carry)."""
-        view = self if bounce.pairs is None else bounce.pairs.with_bsdf(self.bsdf)
+        view = self if bounce.pairs is None else bounce.pairs.view.with_bsdf(self.bsdf)
         for t0, t1 in view._chunks():
             si, wo, _, _, light = view._pairs(t0, t1)
             yield dr.block_sum(view._weights(si, wo, light, t0, t1, bounce.blocked), t1 - t0)

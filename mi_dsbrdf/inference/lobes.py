@@ -102,27 +102,25 @@ class LobeSum:
                 dense = (*self.geometry[:2], self.texels.pair_geometry(b.blocked)[2])
                 out.append(compact_pairs(dense, b.blocked))
             else:
-                out.append(b.pairs.bounce_pair_geometry[k])
+                out.append(b.pairs.geometry[k])
         return out
 
     def _bounce_sums(self, terms, n_terms, chunk, material, kind):
         """Per bounce: yield (its index, p0, p1, (n_terms, p1 - p0)): each pixel's sum
         over all the pairs it blocks of ``terms(lc, td, w)`` for ``material`` (``kind``
-        names the terms). Under a light they are kept for the next light (the pairs
-        are the light's map of directions, :attr:`TexelSum.bounce_memo
-        <mi_dsbrdf.inference.forward.TexelSum.bounce_memo>`)."""
+        names the terms). Under a light they are kept for the next light
+        (:attr:`SurfacePairs.memo <mi_dsbrdf.inference.bounce.SurfacePairs.memo>`)."""
         for k, (geometry, first, counts) in enumerate(self.bounce_geometry):
             pairs = self.texels.bounces[k].pairs
+            memo = {} if pairs is None else pairs.memo
             key = (kind, k, material.log_kappa.tobytes(), material.log_gamma.tobytes(),
                    material.chromaticity.tobytes(), np.asarray(material.knots).tobytes())
-            rows = None if pairs is None else pairs.bounce_memo.get(key)
+            rows = memo.get(key)
             if rows is None:
                 rows = list(self._ragged_sums(geometry, first, counts, terms, n_terms, chunk))
-                if pairs is not None:
-                    memo = pairs.bounce_memo
-                    while len(memo) >= MEMO_MATERIALS:
-                        memo.pop(next(iter(memo)))
-                    memo[key] = rows
+                while len(memo) >= MEMO_MATERIALS:
+                    memo.pop(next(iter(memo)))
+                memo[key] = rows
             for p0, p1, sums in rows:
                 yield k, p0, p1, sums
 
@@ -231,12 +229,17 @@ class LobeSum:
             dr.eval(*sums)
             yield p0, p1, np.stack([a.numpy() for a in sums]).reshape(n_terms, p1 - p0)
 
-    def _channels(self, material, out):
-        """Fill ``out`` (3, P, T) with weight * Eq. 4 per colour channel."""
+    def _rgb(self, material):
+        """The terms of the image: ``rgb(lc, td, w)``, weight * Eq. 4 per colour channel."""
         lk, lg, ch = self._scalars(material)
 
         def rgb(lc, td, w):
             return [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
+        return rgb
+
+    def _channels(self, material, out):
+        """Fill ``out`` (3, P, T) with weight * Eq. 4 per colour channel."""
+        rgb = self._rgb(material)
         if self.texels.ray_lanes:
             for p0, p1, sums in self._ray_sums(rgb, 3, VALUE_CHUNK):
                 out[:, p0:p1] = sums
@@ -258,11 +261,7 @@ class LobeSum:
         terms (:mod:`~mi_dsbrdf.inference.bounce`)."""
         out = self._channels(material, np.empty((3, self.n_pixels, self.n_texels), np.float32))
         if self.texels.bounces:
-            lk, lg, ch = self._scalars(material)
-
-            def rgb(lc, td, w):
-                return [w * v for v in lobe_rgb(lc, td, lk, lg, ch, material.knots)]
-            for k, p0, p1, b in self._bounce_sums(rgb, 3, VALUE_CHUNK, material, "rgb"):
+            for k, p0, p1, b in self._bounce_sums(self._rgb(material), 3, VALUE_CHUNK, material, "rgb"):
                 m = self.texels.bounces[k].transport_term.astype(np.float32)
                 for c in range(3):                   # in float32, a channel at a time: no large temporaries
                     out[c, p0:p1] += np.multiply.outer(b[c].astype(np.float32), m[c])

@@ -10,8 +10,6 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_dsbrdf.inference.bounce import shape_index
-
 
 def centre_hits(scene, sensor, shape) -> tuple:
     """(the SurfaceInteraction of the ray through each pixel centre of ``sensor``'s
@@ -34,9 +32,19 @@ def sample_hits(scene, sensor, shape, pixels, side) -> tuple:
     uv = mi.Point2f((x.reshape(-1) / w).astype(np.float32), (y.reshape(-1) / h).astype(np.float32))
     rays, _ = sensor.sample_ray(0.0, 0.5, uv, mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(rays)
-    hit = np.array(si.is_valid()) & (np.array(dr.reinterpret_array(mi.UInt32, si.shape)) ==
-                                     np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))
-    return si, hit
+    return si, shape_index(si, [shape]) == 0
+
+
+def shape_index(hits, shapes) -> np.ndarray:
+    """(N,) int8: the index in ``shapes`` of the shape each intersection ``hits`` (a
+    SurfaceInteraction or a PreliminaryIntersection) meets, -1 for none of them (or
+    no hit)."""
+    valid = np.array(hits.is_valid(), dtype=bool)
+    ptr = np.array(dr.reinterpret_array(mi.UInt32, hits.shape))
+    out = np.full(valid.shape, -1, dtype=np.int8)
+    for i, shape in enumerate(shapes):
+        out[valid & (ptr == np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))))] = i
+    return out
 
 
 @dataclasses.dataclass(frozen=True)

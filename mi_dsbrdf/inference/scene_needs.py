@@ -147,10 +147,11 @@ def dsbrdf_object(scene):
     return objects[0]
 
 
-def decide(scene, image, mask=None, n_lobes=3, n_bases=10, visibility=None) -> SceneNeeds:
+def decide(scene, image, mask=None, n_lobes=3, n_bases=10, visibility=None, surfaces=None) -> SceneNeeds:
     """The needs of ``scene`` (a loaded mi.Scene) observed as ``image`` (H, W, C).
-    ``visibility``: :func:`needs_visibility` of the scene's object and light, when the
-    caller has it already (a mesh's convexity is not tested twice)."""
+    ``visibility``: :func:`needs_visibility` of the scene's object and light, and
+    ``surfaces``: :func:`bounce_surfaces` of it, when the caller has them already
+    (a mesh's convexity is not tested twice)."""
     emitters = scene.emitters()
     if len(emitters) != 1:
         raise SceneError("inference needs exactly one light in the scene, found %d" % len(emitters))
@@ -163,9 +164,9 @@ def decide(scene, image, mask=None, n_lobes=3, n_bases=10, visibility=None) -> S
     reasons.append("colour pass: %s" % ("no (the image is grey)" if grey else "yes (the image has colour)"))
     trace, why = needs_visibility(scene, obj, light) if visibility is None else visibility
     reasons.append("visibility rays: %s (%s)" % ("yes" if trace else "no", why))
-    surfaces = ()
+    modelled = ()
     if other_shapes(scene, obj):
-        surfaces, why = bounce_surfaces(scene, obj)
+        modelled, why = bounce_surfaces(scene, obj) if surfaces is None else surfaces
         reasons.append("light the other shapes reflect onto the object: %s" % why)
     reasons.append("reflectance: %d lobes, %d bases" % (n_lobes, n_bases))
-    return SceneNeeds(light, not grey, trace, n_lobes, n_bases, tuple(reasons), surfaces)
+    return SceneNeeds(light, not grey, trace, n_lobes, n_bases, tuple(reasons), modelled)
