@@ -193,7 +193,8 @@ def footprint_case(material, light, res, k) -> dict:
     ts = texels({"type": "dsbrdf"}, res * k, FOOTPRINT_MAP, samples=2).with_bsdf(bsdf)
     area = render(ts, light.reshape(-1, 3)).reshape(res, k, res, k, 3).mean(axis=(1, 3))
     out["pixel_area_samples_2"] = relative_l1(area, mitsuba, mask)
-    ts = texels({"type": "dsbrdf"}, res, FOOTPRINT_MAP).with_map_size(FOOTPRINT_MAP, 2, HIGHLIGHT_TEXELS)
+    ts = texels({"type": "dsbrdf"}, res, FOOTPRINT_MAP).with_map_size(FOOTPRINT_MAP, 2)
+    ts = ts.with_highlights(HIGHLIGHT_TEXELS)
     ts = ts.with_bsdf(bsdf)
     out["highlight_pairs_samples_2"] = relative_l1(render(ts, light.reshape(-1, 3)), mitsuba, mask)
     return out

@@ -206,3 +206,30 @@ def test_other_shapes_shadow_a_point_or_directional_light_as_in_monte_carlo(ligh
     # (the render integrates each pixel's footprint, the texel sum its centre)
     dark = r.mean(axis=1) < 1e-2 * r.mean()
     assert np.mean(dark[facing & ~ts.visibility[:, 0]]) > 0.8 and np.mean(dark[facing & ts.visibility[:, 0]]) < 0.1
+
+
+@pytest.mark.parametrize("light", ["point", "directional"])
+def test_a_lights_shadow_rays_are_the_plain_shadow_test(light):
+    """FootprintRays.shadow_test (the rays uploaded once, one kernel for every light)
+    gives what the plain shadow_test gives with one lane a ray, light after light."""
+    from test_scene_needs import LIGHT, TOWARDS, blocked_scene
+
+    from mi_dsbrdf.inference.rays import shadow_test
+    s = mi.load_dict(blocked_scene(light, res=24))
+    obj = [sh for sh in s.shapes() if sh.id() == "object"][0]
+    rays = TexelSum(s, obj, (1, 1), visibility=True, pixel_rays=2).footprint_rays
+    n = rays.share.size
+    for shift in (np.zeros(3), np.array([0.3, -0.2, 0.1])):
+        if light == "point":
+            position, direction = LIGHT + shift, None
+            to = position[None, :] - rays.positions.T
+            dirs = to / np.linalg.norm(to, axis=1, keepdims=True)
+        else:
+            position = None
+            direction = (TOWARDS + shift) / np.linalg.norm(TOWARDS + shift)
+            dirs = np.repeat(direction[None], n, axis=0)
+        fast = rays.shadow_test(s, position, direction)
+        plain, _ = shadow_test(s, rays.positions, rays.normals, rays.frames, dirs, position, n // 4, 4, [(0, 4)],
+                               True)
+        assert not fast.all() and fast.any()
+        np.testing.assert_array_equal(fast, plain.reshape(-1))

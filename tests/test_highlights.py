@@ -37,7 +37,7 @@ def test_highlight_pairs_are_the_sum_over_a_finer_film_and_map():
     plain texel sum. The highlight texels are those nearest the mirror direction."""
     bsdf = dsbrdf_bsdf(model_data.shipped_model().library_material("chrome"))
     plain = texels(bsdf, RES, MAP, samples=2)
-    lit = plain.with_map_size(MAP, samples=2, highlights=NEAREST)
+    lit = plain.with_map_size(MAP, samples=2).with_highlights(NEAREST)
     h = lit.highlights
     assert h.texels.shape == (plain.n_pixels, NEAREST) and plain.highlights is None
     T, T0 = lit.transport(), plain.transport()
@@ -79,7 +79,7 @@ def test_fast_path_matches_the_plugin_with_highlights():
     props.update({"chromaticity_%d" % r: " ".join(map(str, chroma[r])) for r in range(3)})
     from mi_dsbrdf.brdf.dsbrdf import Material
     material = Material.from_basis(model.basis, psi, chroma)
-    ts = texels(props, RES, MAP).with_map_size(MAP, samples=2, highlights=NEAREST)
+    ts = texels(props, RES, MAP).with_map_size(MAP, samples=2).with_highlights(NEAREST)
     fast = LobeSum(ts)
     T = ts.transport()
     assert T.max() > 0 and relative(fast.transport(material), T) < 1e-5
@@ -107,3 +107,28 @@ def test_fast_path_matches_the_plugin_with_highlights():
     assert relative(jac.image, image) < 1e-5
     k = model.basis.n_bases
     assert relative(psi_jacobian(model.basis, psi, jac.controls).transpose(2, 1, 0), J[:, :, :k]) < 1e-4
+
+
+def test_highlight_shadows_from_the_pixel_centre_agree_with_each_ray_across_the_pixel():
+    """A card hides part of the map: the highlight pairs' shadow rays, traced from
+    each pixel's centre hit, agree with rays from each of the q^2 points across the
+    pixel on nearly every lane; with_highlights keeps the view's own shadows."""
+    from test_scene_needs import card
+
+    from mi_dsbrdf.inference.forward import TexelSum
+    from mi_dsbrdf.inference.scene_dicts import camera
+    s = mi.load_dict({"type": "scene", "sensor": camera(24), "object": {"type": "sphere", "bsdf": {"type": "dsbrdf"}},
+                      "light": {"type": "constant"}, "card": card(0.5)})
+    obj = [sh for sh in s.shapes() if sh.id() == "object"][0]
+    view = TexelSum(s, obj, MAP, visibility=True, samples=2)
+    lit = view.with_highlights(NEAREST)
+    assert lit.visibility is view.visibility and lit.highlights is not None and view.highlights is None
+    h = lit.highlights
+    ray, direction = h.lanes()
+    si = dr.gather(mi.SurfaceInteraction3f, h.si, ray)
+    wo = dr.gather(mi.Vector3f, mi.Vector3f(*(mi.Float(h.directions[:, k].astype(np.float32)) for k in range(3))),
+                   direction)
+    each = ~s.ray_test(si.spawn_ray(wo), (si.to_local(wo).z > 0) & (si.wi.z > 0)).numpy().reshape(h.n_pixels, -1)
+    assert not each.all() and not h.visibility.all()
+    # measured: 0.2 % of the lanes differ, of 3 % in shadow (a shadow's edge within a pixel)
+    assert np.mean(each != h.visibility) < 0.15 * np.mean(~each), (np.mean(each != h.visibility), np.mean(~each))

@@ -359,7 +359,7 @@ def test_the_highlight_pairs_refine_the_answer_only_where_they_change_its_image(
     # the change is the pairs' re-render of the answer against the texel sum's
     L = np.asarray(never.illumination).reshape(-1, 3)
     plain = LobeSum(ts.with_map_size((8, 16), base.texel_samples)).render(never.material, L)
-    pairs = LobeSum(ts.with_map_size((8, 16), base.texel_samples, 25)).render(never.material, L)
+    pairs = LobeSum(ts.with_map_size((8, 16), base.texel_samples).with_highlights(25)).render(never.material, L)
     assert never.highlight_change > 0
     assert never.highlight_change == pytest.approx(np.abs(pairs - plain).sum() / np.abs(pairs).sum(), rel=0.05)
     passes = [r["pass"] for r in always.log]

@@ -122,7 +122,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
         if needs.envmap_block:
             rec = recover_envmap(ts, work, keep, model, cfg, colour=needs.colour_pass, progress=report)
             # the re-render as the answer was fitted: with the highlight pairs if it was
-            lit = ts.with_map_size(cfg.map_size, cfg.texel_samples, rec.highlight_texels) if rec.highlight_texels \
+            lit = ts.with_highlights(rec.highlight_texels) if rec.highlight_texels \
                 else ts
             light, L = None, rec.illumination.reshape(-1, 3)
         else:

@@ -128,11 +128,29 @@ def map_bounces(scene, surfaces, which, positions, normals, directions, solid_an
 def light_bounces(scene, pairs, position=None, direction=None) -> tuple:
     """The bounces of :class:`SurfacePairs` ``pairs`` (whose view's :func:`map_bounces`
     find the surfaces) under a point light at ``position``, else a directional light
-    along ``direction`` (towards it) of unit irradiance."""
-    kw = ({"position": position} if position is not None
-          else {"light_directions": np.asarray(direction).reshape(1, 3), "solid_angles": np.ones(1)})
-    return tuple(dataclasses.replace(b, pairs=pairs, weights=surface_weights(scene, b.points, **kw))
-                 for b in pairs.view.bounces)
+    along ``direction`` (towards it) of unit irradiance. Every surface's points are
+    traced in one launch (a light search moves the light hundreds of times)."""
+    bounces = pairs.view.bounces
+    if not bounces:
+        return ()
+    y, nrm = (np.concatenate([b.points[i] for b in bounces]) for i in range(2))
+    lit = light_point_weights(scene, y, nrm, position, direction)
+    ends = np.cumsum([b.points[0].shape[0] for b in bounces])
+    return tuple(dataclasses.replace(b, pairs=pairs, weights=np.array([float(w.mean())]))
+                 for b, w in zip(bounces, np.split(lit, ends[:-1])))
+
+
+def light_point_weights(scene, y, normals, position=None, direction=None) -> np.ndarray:
+    """(N,) max(0, n . d) V / r^2 at the surface points ``y`` (N, 3) of ``normals``
+    (N, 3) from a point light at ``position``; else max(0, n . d) V along the
+    unit ``direction`` (3,) of a directional light: g_s of the module doc per point."""
+    if position is not None:
+        to = np.asarray(position, dtype=np.float64).reshape(1, 3) - y
+        r2 = np.maximum((to * to).sum(axis=1), 1e-12)
+        dirs = to / np.sqrt(r2)[:, None]
+        return np.maximum((dirs * normals).sum(axis=1), 0.0) * _unblocked(scene, y, normals, dirs, np.sqrt(r2)) / r2
+    dirs = np.broadcast_to(np.asarray(direction, dtype=np.float64).reshape(1, 3), y.shape)
+    return np.maximum((dirs * normals).sum(axis=1), 0.0) * _unblocked(scene, y, normals, dirs)
 
 
 def diffuse_albedo(shape):
@@ -162,20 +180,13 @@ def surface_points(scene, origins, normals, directions) -> tuple:
     return y, nrm
 
 
-def surface_weights(scene, points, light_directions=None, solid_angles=None, per_texel=1,
-                    position=None) -> np.ndarray:
+def surface_weights(scene, points, light_directions, solid_angles, per_texel=1) -> np.ndarray:
     """g_s of the module doc, (n_texels,), over the surface's ``points`` ((n, 3)
-    points, (n, 3) normals: :func:`surface_points`). The light: a point light at
-    ``position``; else the world directions ``light_directions`` (M, 3) with
-    ``solid_angles`` (M,), in texels of ``per_texel`` consecutive directions (a
-    map's, or one direction with solid angle 1: a directional light)."""
+    points, (n, 3) normals: :func:`surface_points`) under the world directions
+    ``light_directions`` (M, 3) with ``solid_angles`` (M,), in texels of
+    ``per_texel`` consecutive directions (a map's). A point or a directional
+    light's: :func:`light_point_weights`."""
     y, nrm = points
-    if position is not None:
-        to = np.asarray(position, dtype=np.float64).reshape(1, 3) - y
-        r2 = np.maximum((to * to).sum(axis=1), 1e-12)
-        dirs = to / np.sqrt(r2)[:, None]
-        lit = _unblocked(scene, y, nrm, dirs, np.sqrt(r2))
-        return np.array([float((np.maximum((dirs * nrm).sum(axis=1), 0.0) * lit / r2).mean())])
     m = light_directions.shape[0]
     g = np.zeros(m)
     step = max(1, CHUNK_RAYS // m)                  # points a launch: bounded memory at any map size

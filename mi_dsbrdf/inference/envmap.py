@@ -129,9 +129,26 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
             pass_cfg = cfg.with_colour_split(False)
         key = (size, samples, highlights, pass_cfg)
         if key not in posteriors:
-            posteriors[key] = Posterior(texels.with_map_size(size, samples, highlights), observed, mask, model,
-                                        pass_cfg, max_pixels=max_pixels)
+            posteriors[key] = Posterior(view(size, samples, highlights), observed, mask, model, pass_cfg,
+                                        max_pixels=max_pixels)
         return posteriors[key]
+
+    views = {}
+
+    def view(size, samples, highlights):
+        # a view's shadow rays and bounces are traced once, whichever passes share it:
+        # ``texels`` itself where it is the map asked for, the highlight pairs added
+        # to the view without them
+        key = (tuple(size), samples, highlights)
+        if key not in views:
+            if highlights:
+                views[key] = view(size, samples, 0).with_highlights(highlights)
+            elif (key[0] == texels.map_size and samples ** 2 == texels.per_texel and texels.highlights is None
+                  and not texels.ray_lanes):
+                views[key] = texels
+            else:
+                views[key] = texels.with_map_size(size, samples)
+        return views[key]
 
     rows = []
     t0 = time.perf_counter()

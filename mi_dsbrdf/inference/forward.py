@@ -113,21 +113,35 @@ class TexelSum:
         self.map_size = (H, W)
         d, omega = texel_directions(H, W, s)
         self._light(self._world(d), omega, None, s * s)
-        if highlights:
-            fine, fine_omega = texel_directions(H, W, TEXEL_SIDE)
-            self.highlights = HighlightPairs.build(self._scene, self._sensor, self._shape, self.pixels, self.si,
-                                                   self._world(latlong_directions(H, W).reshape(-1, 3)),
-                                                   self._world(fine), fine_omega, self._trace, nearest=highlights)
+        self.highlights = self._highlight_pairs(highlights)
+
+    def _highlight_pairs(self, highlights):
+        if not highlights:
+            return None
+        H, W = self.map_size
+        fine, fine_omega = texel_directions(H, W, TEXEL_SIDE)
+        return HighlightPairs.build(self._scene, self._sensor, self._shape, self.pixels, self.si,
+                                    self._world(latlong_directions(H, W).reshape(-1, 3)), self._world(fine),
+                                    fine_omega, self._trace, nearest=highlights)
 
     # A TexelSum is never changed once made: a new light, BSDF or pixel subset
     # is a new (shallow) copy that shares the geometry. (Its footprint_rays are
     # traced on first use and kept: geometry of its own, not a change.)
-    def with_map_size(self, map_size, samples=1, highlights=0) -> "TexelSum":
+    def with_map_size(self, map_size, samples=1) -> "TexelSum":
         """This view under an illumination map of ``map_size`` (H, W) texels, each
-        lit from ``samples`` x ``samples`` directions (module doc), with the highlight
-        pairs of ``highlights`` texels a pixel (class doc; 0: none)."""
+        lit from ``samples`` x ``samples`` directions (module doc)."""
         out = copy.copy(self)
-        out._map(map_size, samples, highlights)
+        out._map(map_size, samples)
+        return out
+
+    def with_highlights(self, highlights) -> "TexelSum":
+        """This map view with the highlight pairs of ``highlights`` texels a pixel
+        (class doc; 0: none). Its shadow rays and bounces are this view's: only the
+        pairs are built."""
+        if self.ray_lanes:
+            raise ValueError("with_highlights: a map view's, not a point or directional light's")
+        out = copy.copy(self)
+        out.highlights = self._highlight_pairs(highlights)
         return out
 
     def with_directions(self, directions, solid_angles) -> "TexelSum":
@@ -274,16 +288,18 @@ class TexelSum:
         :class:`~mi_dsbrdf.inference.bounce.Bounce` of each of ``surfaces`` that
         blocks a pair)."""
         if self.ray_lanes:
-            rays = self.footprint_rays
-            points, normals, frames = rays.positions, rays.normals, rays.frames
-        else:
-            points, normals, frames = self.positions, np.array(self.si.n, dtype=np.float64), self.frames
-        vis, which = shadow_test(scene, points, normals, frames, self.directions, self.light_position,
-                                 self.n_pixels, self.n_directions, self._chunks(), self.ray_lanes, self._surfaces)
+            # a light's rays see the light alone: the surfaces the pixels see come
+            # from bounce_view's map of directions
+            vis = self.footprint_rays.shadow_test(scene, self.light_position, self.directions[0]).reshape(
+                self.n_pixels, self.n_directions)
+            if not self._surfaces:
+                return vis, ()
+            return vis, light_bounces(scene, self.bounce_view, self.light_position, self.directions[0])
+        normals = np.array(self.si.n, dtype=np.float64)
+        vis, which = shadow_test(scene, self.positions, normals, self.frames, self.directions, None,
+                                 self.n_pixels, self.n_directions, self._chunks(), False, self._surfaces)
         if not self._surfaces:
             return vis, ()
-        if self.ray_lanes:              # a light: the surfaces the pixels see, from its map of directions
-            return vis, light_bounces(scene, self.bounce_view, self.light_position, self.directions[0])
         return vis, map_bounces(scene, self._surfaces, which, self.positions, normals, self.directions,
                                 self.solid_angles, self.per_texel)
 

@@ -378,12 +378,11 @@ def highlight_change(view: TexelSum, rows, material, illumination, highlights, c
     ``highlights`` texels a pixel integrate the texels nearest each mirror direction
     over the pixel's area and the texel (:mod:`~mi_dsbrdf.inference.highlights`):
     sum |with - without| / sum |with|, the pairs built ``chunk`` pixels at a time."""
-    samples = int(round(view.per_texel ** 0.5))
     change = total = 0.0
     for r0 in range(0, len(rows), chunk):
         sub = view.subset(rows[r0:r0 + chunk])
         plain = LobeSum(sub).render(material, illumination)
-        pairs = LobeSum(sub.with_map_size(sub.map_size, samples, highlights)).render(material, illumination)
+        pairs = LobeSum(sub.with_highlights(highlights)).render(material, illumination)
         change += float(np.abs(pairs - plain).sum())
         total += float(np.abs(pairs).sum())
     return change / max(total, 1e-300)

@@ -47,6 +47,10 @@ def shape_index(hits, shapes) -> np.ndarray:
     return out
 
 
+#: a light's shadow rays traced at once (:meth:`FootprintRays.shadow_test`)
+SHADOW_CHUNK = 1 << 20
+
+
 @dataclasses.dataclass(frozen=True)
 class FootprintRays:
     """``side`` x ``side`` camera rays across the area of each of P pixels
@@ -89,6 +93,45 @@ class FootprintRays:
         """The frames as one float32 Dr.Jit array, (s, t, n, wi) x (x, y, z) rows of
         P * side^2 values: uploaded once for every light of the view."""
         return mi.Float(np.concatenate(self.frames).reshape(-1).astype(np.float32))
+
+    @functools.cached_property
+    def shadow_buffer(self):
+        """Each ray's surface point, geometric normal and shading normal, and the
+        camera direction's cosine, as one float32 Dr.Jit array of 10 rows: uploaded
+        once for every light's shadow rays (:meth:`shadow_test`)."""
+        rows = [self.positions, self.normals, self.frames[2], self.frames[3][2:3]]
+        return mi.Float(np.concatenate([r.reshape(-1) for r in rows]).astype(np.float32))
+
+    def shadow_test(self, scene, position=None, direction=None) -> np.ndarray:
+        """(N,) bool: the light reaches each ray's surface point, from a point light
+        at ``position`` or a directional light along ``direction`` (towards it),
+        through the whole scene. :func:`shadow_test` with ``ray_lanes`` gives the
+        same (its plain form, which the tests hold this to); this one uploads the
+        rays once per view and traces one kernel for every light, so that a light
+        search's hundreds of positions cost one ray each a lane (measured: 1.7 of
+        8.5 s on a point-lit sphere beside a blocker through shadow_test)."""
+        n = self.share.size
+        light = np.asarray(position if position is not None else direction, dtype=np.float32).reshape(3)
+        buf, lit = self.shadow_buffer, mi.Float(light)       # one fresh array: the same kernel for every light
+        vis = np.ones(n, dtype=bool)
+        for r0 in range(0, n, SHADOW_CHUNK):
+            lane = dr.arange(mi.UInt32, min(SHADOW_CHUNK, n - r0)) + dr.opaque(mi.UInt32, r0)
+
+            def vec(row):
+                return mi.Vector3f(*(dr.gather(mi.Float, buf, lane + (row + k) * n) for k in range(3)))
+            si = dr.zeros(mi.SurfaceInteraction3f, dr.width(lane))      # the geometric normal offsets the rays
+            si.p, si.n = mi.Point3f(vec(0)), mi.Normal3f(vec(3))
+            target = mi.Vector3f(*(dr.gather(mi.Float, lit, dr.zeros(mi.UInt32, dr.width(lane)) + k)
+                                   for k in range(3)))
+            if position is not None:
+                ray = si.spawn_ray_to(mi.Point3f(target))
+                towards = target - si.p
+            else:
+                ray = si.spawn_ray(target)
+                towards = target
+            active = (dr.dot(vec(6), towards) > 0) & (dr.gather(mi.Float, buf, lane + 9 * n) > 0)
+            vis[r0:r0 + dr.width(lane)] = ~scene.ray_test(ray, active).numpy()
+        return vis
 
     def subset(self, rows) -> "FootprintRays":
         """The rays of the pixels ``rows`` (indices into this object's P)."""
