@@ -211,7 +211,26 @@ class TexelSum:
         # and solid angle (times the ray's share of its pixel); a map's are pixel x direction
         self.ray_lanes = ray_lanes
         self.highlights = None              # a map's (_map) or none
-        self.visibility, self.bounces = self._trace_visibility(self._scene) if self._trace else (None, ())
+        # (visibility, bounces): a map's traced now; a light's on first use (a light
+        # search re-aims views it never renders), then kept like footprint_rays
+        self._shadows = None if ray_lanes else self._trace_visibility(self._scene)
+
+    @property
+    def visibility(self):
+        """(P, n_directions) bool: the light of each pixel-direction pair reaches its
+        surface point (shadow rays through the scene); None without them."""
+        return self._shadowing()[0]
+
+    @property
+    def bounces(self) -> tuple:
+        """The :class:`~mi_dsbrdf.inference.bounce.Bounce` of each of ``surfaces``
+        that blocks a pair."""
+        return self._shadowing()[1]
+
+    def _shadowing(self) -> tuple:
+        if self._shadows is None:
+            self._shadows = self._trace_visibility(self._scene)
+        return self._shadows
 
     def subset(self, rows) -> "TexelSum":
         """The same view restricted to the pixels ``self.pixels[rows]`` (sharing the
@@ -223,12 +242,14 @@ class TexelSum:
         sub.si = dr.gather(mi.SurfaceInteraction3f, self.si, mi.UInt32(rows.astype(np.uint32)))
         sub.frames = tuple(f[:, rows] for f in self.frames)
         sub.positions = self.positions[:, rows]
-        sub.visibility = None if self.visibility is None else self.visibility[rows]
         if "footprint_rays" in self.__dict__:              # traced already: the pixels' own
             sub.footprint_rays = self.footprint_rays.subset(rows)
         if "bounce_view" in self.__dict__:
             sub.bounce_view = self.bounce_view.subset(rows)
-        sub.bounces = tuple(b.subset(rows, None if b.pairs is None else sub.bounce_view) for b in self.bounces)
+        if self._shadows is not None:                      # else the subset traces its own on first use
+            vis, bounces = self._shadows
+            sub._shadows = (None if vis is None else vis[rows],
+                            tuple(b.subset(rows, None if b.pairs is None else sub.bounce_view) for b in bounces))
         if self.ray_lanes:
             lanes = (rows[:, None] * self.per_texel + np.arange(self.per_texel)).reshape(-1)
             sub.directions, sub.solid_angles = self.directions[lanes], self.solid_angles[lanes]
@@ -286,7 +307,9 @@ class TexelSum:
         surface point (:func:`~mi_dsbrdf.inference.rays.shadow_test`): a light's rays
         (one per lane), or the pixels' centre hits; the
         :class:`~mi_dsbrdf.inference.bounce.Bounce` of each of ``surfaces`` that
-        blocks a pair)."""
+        blocks a pair); (None, ()) without shadow rays."""
+        if not self._trace:
+            return None, ()
         if self.ray_lanes:
             # a light's rays see the light alone: the surfaces the pixels see come
             # from bounce_view's map of directions
