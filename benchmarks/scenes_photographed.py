@@ -33,7 +33,11 @@ exactly), no noise, no clipping, recovered alike. Scores, for both:
   cosine convention, the sphere without its silhouette ring);
 * ``seconds``: the recovery's wall time;
 * doing nothing: the leave-one-out model's mean material (BRDF, relit) and a
-  constant map, on the same case.
+  constant map, on the same case;
+* the Mitsuba recipe (``adam``): ``principled`` + an envmap of the recovered map's
+  size fitted to the same photograph by Adam through ``prb`` (max depth 3, the
+  scene's ground in it; :data:`ADAM_SPP` spp, the clipped pixels left out) for as
+  long as the recovery took, scored alike.
 
 The point case: a sphere on the ground beside a small blocker that shadows part of
 it, under a point light, photographed and recovered alike (``direction_error_deg``
@@ -81,6 +85,9 @@ RELIT_PROBES = ["probulator/pisa.hdr", "probulator/uffizi.hdr", "probulator/enni
 POINT_ANGLE, POINT_DISTANCE = 45.0, 4.0
 BLOCKER_ALONG, BLOCKER_SIDE, BLOCKER_RADIUS = 0.5, 0.55, 0.25
 OBJECTS = ("sphere", "torus")
+#: the Mitsuba recipe: samples per pixel of each Adam iteration, and at most this many
+#: iterations (it stops at the recovery's wall time)
+ADAM_SPP, ADAM_MAX_ITERS = 8, 2000
 
 
 def camera(res):
@@ -141,10 +148,11 @@ def relit(material, truth_bsdf, probe, data) -> float:
     from mi_dsbrdf.inference.rays import centre_hits
     from mi_dsbrdf.inference.scene_dicts import camera as front_camera, shape_dict
     errors = []
+    fitted = dsbrdf_bsdf(material) if hasattr(material, "log_kappa") else material      # else a Mitsuba BSDF
     for p in [p for p in RELIT_PROBES if p != probe][:2]:
         light = {"type": "envmap", "filename": os.path.join(data, "envmaps", p)}
         images = []
-        for bsdf in (truth_bsdf, dsbrdf_bsdf(material)):
+        for bsdf in (truth_bsdf, fitted):
             s = mi.load_dict({"type": "scene", "integrator": {"type": "direct", "hide_emitters": True},
                               "sensor": front_camera(RELIT_RES), "object": shape_dict("sphere", bsdf),
                               "light": light})
@@ -162,8 +170,9 @@ def recover_case(scene, image, model) -> tuple:
 
 
 def brdf_scores(material, samples) -> dict:
-    from mi_dsbrdf.evaluation.metrics import CONVENTIONS, log_rmse_scale_invariant
-    values = material.eval(samples.theta_h, samples.theta_d)
+    from mi_dsbrdf.evaluation.metrics import CONVENTIONS, bsdf_values, log_rmse_scale_invariant
+    values = material.eval(samples.theta_h, samples.theta_d) if hasattr(material, "log_kappa") else \
+        bsdf_values(material, samples)
     return {"brdf_eq20_" + c: log_rmse_scale_invariant(values, samples.values, samples.cos_i, c)[0]
             for c in CONVENTIONS}
 
@@ -195,7 +204,8 @@ def map_case(material, probe, obj, data, clean=None, res=RES) -> dict:
     for kind, ground, integrator in (("scene", True, PATH), ("clean", False, {"type": "direct"})):
         if kind in out:
             continue
-        img, _ = photograph(scene_dict(obj, truth_bsdf, light, integrator, ground, res=res), name, kind == "clean")
+        img, mask = photograph(scene_dict(obj, truth_bsdf, light, integrator, ground, res=res), name,
+                               kind == "clean")
         result, seconds = recover_case(scene_dict(obj, {"type": "dsbrdf"}, light, {"type": "direct"}, ground,
                                                   res=res), img.astype(np.float32), model)
         rec = result.illumination
@@ -210,7 +220,25 @@ def map_case(material, probe, obj, data, clean=None, res=RES) -> dict:
             nothing.update(brdf_scores(model.mean_material(), samples))
             nothing.update(map_scores(np.ones_like(truth), result.seen, truth))
             out["nothing"] = nothing
+            out["adam"] = adam_case(scene_dict(obj, {"type": "dsbrdf"}, None, None, ground, res=res), img, mask,
+                                    seconds, rec.shape[:2], truth_bsdf, probe, data, samples, result.seen, truth)
     return out
+
+
+def adam_case(scene, img, mask, seconds, map_hw, truth_bsdf, probe, data, samples, seen, truth) -> dict:
+    """The Mitsuba recipe on the photograph ``img`` of ``scene`` (a dict without its
+    light) for ``seconds``, scored as the recovery (module doc)."""
+    from mi_dsbrdf.evaluation.adam import adam_recover
+    usable = mask & (img.max(axis=2) < img[mask].max())        # the clipped pixels left out, as the tool does
+    t0 = time.perf_counter()
+    fit = adam_recover(img, usable, img.shape[0], map_hw, "principled-adam", spp=ADAM_SPP, iters=ADAM_MAX_ITERS,
+                       scene={k: v for k, v in scene.items() if k not in ("light", "integrator")},
+                       seconds=seconds)
+    row = {"seconds": time.perf_counter() - t0, "iterations": len(fit["rows"]),
+           "relit": relit(fit["bsdf"], truth_bsdf, probe, data)}
+    row.update(brdf_scores(fit["bsdf"], samples))
+    row.update(map_scores(fit["map"], seen, truth))
+    return row
 
 
 def point_case(material, data, clean=None, res=RES) -> dict:
@@ -309,17 +337,19 @@ def summarise(rows, point, command) -> dict:
     """Medians, ratios and counts of the map cases (the issue's targets), and the point case."""
     def med(kind, key):
         return float(np.median([r[kind][key] for r in rows]))
-    out = {"command": command, "cases": len(rows), "median": {}, "better_than_nothing": {}}
-    for kind in ("scene", "clean", "nothing"):
+    out = {"command": command, "cases": len(rows), "median": {}, "better_than_nothing": {}, "better_than_adam": {}}
+    for kind in ("scene", "clean", "nothing", "adam"):
         out["median"][kind] = {k: med(kind, k) for k in MEASURES}
     for k in MEASURES:
         out["better_than_nothing"][k] = int(sum(r["scene"][k] < r["nothing"][k] for r in rows))
+        out["better_than_adam"][k] = int(sum(r["scene"][k] < r["adam"][k] for r in rows))
+    out["adam_iterations"] = med("adam", "iterations")
     out["relit_scene_over_clean"] = float(np.median([r["scene"]["relit"] / r["clean"]["relit"] for r in rows]))
     out["time_scene_over_clean"] = float(np.median([r["scene"]["seconds"] / r["clean"]["seconds"] for r in rows]))
     out["seconds"] = {"scene": med("scene", "seconds"), "clean": med("clean", "seconds")}
     out["point"] = point
     out["rows"] = [{"case": r["case"], **{"%s_%s" % (kind, k): round(r[kind][k], 4)
-                                          for kind in ("scene", "clean", "nothing") for k in MEASURES},
+                                          for kind in ("scene", "clean", "nothing", "adam") for k in MEASURES},
                     "scene_seconds": round(r["scene"]["seconds"], 1),
                     "clean_seconds": round(r["clean"]["seconds"], 1)} for r in rows]
     return out
@@ -327,13 +357,14 @@ def summarise(rows, point, command) -> dict:
 
 def table(s) -> str:
     n = s["cases"]
-    lines = ["%d map cases: median (scene as photographed | clean twin | doing nothing), "
-             "and how many of the scene's beat doing nothing" % n,
-             "%-18s %8s %8s %8s   %s" % ("measure", "scene", "clean", "nothing", "scene better")]
+    lines = ["%d map cases: median (scene as photographed | clean twin | doing nothing | principled + Adam at "
+             "the same time, median %d iterations), and how many of the scene's beat doing nothing and Adam"
+             % (n, s["adam_iterations"]),
+             "%-18s %8s %8s %8s %8s  %s" % ("measure", "scene", "clean", "nothing", "adam", "beats: nothing, adam")]
     for k in MEASURES:
-        lines.append("%-18s %8.3f %8.3f %8.3f   %d of %d" % (
-            k, s["median"]["scene"][k], s["median"]["clean"][k], s["median"]["nothing"][k],
-            s["better_than_nothing"][k], n))
+        lines.append("%-18s %8.3f %8.3f %8.3f %8.3f   %d, %d of %d" % (
+            k, s["median"]["scene"][k], s["median"]["clean"][k], s["median"]["nothing"][k], s["median"]["adam"][k],
+            s["better_than_nothing"][k], s["better_than_adam"][k], n))
     lines.append("relit, scene over clean twin (median of ratios): %.2f (target <= 1.25)"
                  % s["relit_scene_over_clean"])
     lines.append("time, scene over clean twin (median of ratios): %.2f (target <= 1.5); median %.1f s against %.1f s"

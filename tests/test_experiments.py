@@ -138,6 +138,26 @@ def test_adam_baseline_lowers_its_loss():
         adam_recover(img, ts.mask, 24, (8, 16), "nonsense")
 
 
+def test_adam_in_a_scene_with_a_ground_and_a_time_budget():
+    """The recipe in the user's scene: the object's BSDF replaced (the ground keeps
+    its own), an envmap added, the loop stopped at its time budget."""
+    import mitsuba as mi
+
+    from mi_dsbrdf.evaluation.adam import adam_recover
+    from mi_dsbrdf.inference.scene_dicts import camera
+    grey = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.3, 0.3, 0.3]}}
+    scene = {"type": "scene", "sensor": camera(24), "object": {"type": "sphere", "bsdf": {"type": "dsbrdf"}},
+             "ground": {"type": "rectangle", "bsdf": grey, "to_world": mi.ScalarTransform4f().translate([0, -1, 0])
+                        .scale(4).rotate([1, 0, 0], -90)}}
+    ts = ev.texels({"type": "dsbrdf", "material": "gold-metallic-paint"}, 24, (16, 32))
+    img = ev.render(ts, np.ones((16 * 32, 3)))
+    fit = adam_recover(img, ts.mask, 24, (8, 16), "principled-adam", spp=2, iters=1000, scene=scene, seconds=1.0)
+    assert 1 <= len(fit["rows"]) < 1000
+    assert "roughness.value" in mi.traverse(fit["bsdf"]) and fit["map"].shape == (8, 16, 3)
+    fast = adam_recover(img, ts.mask, 24, (8, 16), "principled-adam", spp=2, iters=1000, scene=scene, seconds=0.0)
+    assert len(fast["rows"]) == 1                     # the first iteration always runs
+
+
 def test_a_diverged_adam_run_stops_at_its_best_iterate(monkeypatch):
     """A variable that turns NaN (Adam diverged; it renders black, so the loss may
     stay finite) ends the loop there, and the answer is the lowest-loss iterate's:

@@ -31,12 +31,15 @@ LR_BSDF, LR_MAP = 0.02, 0.05
 GRAD_LIMIT = 1e15
 
 
-def _scene(bsdf, res, map_hw, shape, level):
+def _scene(bsdf, res, map_hw, shape, level, base=None):
     H, W = map_hw
     env = mi.Bitmap(np.full((H, W, 3), level, dtype=np.float32))
-    return mi.load_dict({"type": "scene", "integrator": {"type": "prb", "max_depth": 2 if shape == "sphere" else 3},
-                         "sensor": camera(res), "object": shape_dict(shape, bsdf),
-                         "emitter": {"type": "envmap", "bitmap": env}})
+    if base is None:
+        d = {"type": "scene", "integrator": {"type": "prb", "max_depth": 2 if shape == "sphere" else 3},
+             "sensor": camera(res), "object": shape_dict(shape, bsdf)}
+    else:                   # the user's scene: one bounce off its other shapes, as the tool models
+        d = dict(base, integrator={"type": "prb", "max_depth": 3}, object=dict(base["object"], bsdf=bsdf))
+    return mi.load_dict(dict(d, emitter={"type": "envmap", "bitmap": env}))
 
 
 def drop_non_finite_gradients(opt) -> int:
@@ -55,9 +58,12 @@ def drop_non_finite_gradients(opt) -> int:
 
 
 def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100, shape="sphere", seed=0,
-                 progress=None) -> dict:
+                 progress=None, scene=None, seconds=None) -> dict:
     """Fit ``method``'s BSDF and an envmap of ``map_hw`` to ``image`` (res, res, 3)
-    over ``mask`` (res, res) bool by Adam through Mitsuba's ``prb``.
+    over ``mask`` (res, res) bool by Adam through Mitsuba's ``prb``: the object
+    ``shape`` alone before the front camera, or a ``scene`` dict with a "sensor",
+    the "object" (its BSDF replaced) and other shapes but no emitter. At most
+    ``iters`` iterations, and none begun after ``seconds`` (a budget: matched time).
 
     Returns {"bsdf": the Mitsuba BSDF (principled) or a DSBRDF Material,
     "map": (H, W, 3) float64, "rows": [{"round", "neg_log_posterior", "seconds"}]}:
@@ -78,7 +84,8 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     obs = np.asarray(image, np.float64)
     m = np.asarray(mask, bool)
     level = float(np.median(obs[m])) * 2.0
-    scene = _scene(bsdf, res, map_hw, shape, level)
+    base = scene
+    scene = _scene(bsdf, res, map_hw, shape, level, base)
     params = mi.traverse(scene)
     opt = mi.ad.Adam(lr=LR_BSDF)
     for key in keys:
@@ -91,6 +98,8 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     rows, t0 = [], time.perf_counter()
     best = (np.inf, None)           # the lowest loss so far and the variables it was rendered with
     for it in range(iters):
+        if seconds is not None and it and time.perf_counter() - t0 >= seconds:
+            break
         params["emitter.data"] = dr.exp(opt["log_map"])
         params.update(opt)
         img = mi.render(scene, params, spp=spp, seed=seed + it)
@@ -129,5 +138,6 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
         chroma = np.array(params["object.bsdf.chromaticity"], np.float64).reshape(R, 3)
         fitted = Material.from_basis(model.basis, psi, chroma)
     else:
-        fitted = scene.shapes()[0].bsdf()
+        fitted = [sh for sh in scene.shapes() if sh.id() == "object"][0].bsdf() if base is not None \
+            else scene.shapes()[0].bsdf()
     return {"bsdf": fitted, "map": env, "rows": rows}
