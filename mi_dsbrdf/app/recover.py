@@ -122,8 +122,7 @@ def recover(scene, image, mask=None, config: Config | str = None, progress=None,
         if needs.envmap_block:
             rec = recover_envmap(ts, work, keep, model, cfg, colour=needs.colour_pass, progress=report)
             # the re-render as the answer was fitted: with the highlight pairs if it was
-            lit = ts.with_highlights(rec.highlight_texels) if rec.highlight_texels \
-                else ts
+            lit = ts.with_highlights(rec.highlight_texels)
             light, L = None, rec.illumination.reshape(-1, 3)
         else:
             point = (centre(obj), point_light_distance(scene, obj)) if needs.light == "point" else None

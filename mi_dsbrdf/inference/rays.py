@@ -105,11 +105,9 @@ class FootprintRays:
     def shadow_test(self, scene, position=None, direction=None) -> np.ndarray:
         """(N,) bool: the light reaches each ray's surface point, from a point light
         at ``position`` or a directional light along ``direction`` (towards it),
-        through the whole scene. :func:`shadow_test` with ``ray_lanes`` gives the
-        same (its plain form, which the tests hold this to); this one uploads the
-        rays once per view and traces one kernel for every light, so that a light
-        search's hundreds of positions cost one ray each a lane (measured: 1.7 of
-        8.5 s on a point-lit sphere beside a blocker through shadow_test)."""
+        through the whole scene: :func:`shadow_test` with ``ray_lanes`` (its plain
+        form, which the tests hold this to), with the rays uploaded once a view and
+        one kernel for every light (a light search tries hundreds)."""
         n = self.share.size
         light = np.asarray(position if position is not None else direction, dtype=np.float32).reshape(3)
         buf, lit = self.shadow_buffer, mi.Float(light)       # one fresh array: the same kernel for every light
