@@ -233,3 +233,29 @@ def test_a_lights_shadow_rays_are_the_plain_shadow_test(light):
                                True)
         assert not fast.all() and fast.any()
         np.testing.assert_array_equal(fast, plain.reshape(-1))
+
+
+def test_a_lights_shadows_are_traced_when_its_view_is_first_rendered(monkeypatch):
+    """A light search re-aims views it never renders: a light's shadow rays run when
+    its visibility is first needed, once, and a subset of a traced view takes its rows."""
+    from test_scene_needs import LIGHT, blocked_scene
+
+    from mi_dsbrdf.inference.rays import FootprintRays
+    s = mi.load_dict(blocked_scene("point", res=24))
+    obj = [sh for sh in s.shapes() if sh.id() == "object"][0]
+    base = TexelSum(s, obj, (1, 1), visibility=True, pixel_rays=2)
+    calls = []
+    traced = FootprintRays.shadow_test
+
+    def counted(self, *a, **k):
+        calls.append(1)
+        return traced(self, *a, **k)
+    monkeypatch.setattr(FootprintRays, "shadow_test", counted)
+    views = [base.with_point(LIGHT + [0.0, 0.1 * i, 0.0]) for i in range(5)]
+    assert calls == []
+    img = views[-1].render(np.full((1, 3), 40.0))
+    assert len(calls) == 1 and not views[-1].visibility.all() and np.all(img[~views[-1].visibility.any(axis=1)] == 0)
+    rows = np.arange(0, views[-1].n_pixels, 3)
+    sub = views[-1].subset(rows)
+    np.testing.assert_array_equal(sub.visibility, views[-1].visibility[rows])
+    assert len(calls) == 1
