@@ -54,8 +54,8 @@ benchmarks/results/scenes_photographed_<set>.json (``--res`` another image side:
 path-traced image the forward model misses without the ground's light, and what
 its one-bounce term recovers (:func:`bounce_case`; ``..._bounce_<set>.json``).
 
-    .venv/bin/python benchmarks/scenes_photographed.py --set validation --limit 4   # ~15 min
-    .venv/bin/python benchmarks/scenes_photographed.py --set report                  # ~60 min
+    .venv/bin/python benchmarks/scenes_photographed.py --set validation --limit 4   # ~13 min
+    .venv/bin/python benchmarks/scenes_photographed.py --set report                  # ~40 min
 """
 import argparse
 import json
