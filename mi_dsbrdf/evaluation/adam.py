@@ -84,8 +84,7 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
     obs = np.asarray(image, np.float64)
     m = np.asarray(mask, bool)
     level = float(np.median(obs[m])) * 2.0
-    base = scene
-    scene = _scene(bsdf, res, map_hw, shape, level, base)
+    scene = _scene(bsdf, res, map_hw, shape, level, scene)
     params = mi.traverse(scene)
     opt = mi.ad.Adam(lr=LR_BSDF)
     for key in keys:
@@ -138,6 +137,5 @@ def adam_recover(image, mask, res, map_hw, method, model=None, spp=16, iters=100
         chroma = np.array(params["object.bsdf.chromaticity"], np.float64).reshape(R, 3)
         fitted = Material.from_basis(model.basis, psi, chroma)
     else:
-        fitted = [sh for sh in scene.shapes() if sh.id() == "object"][0].bsdf() if base is not None \
-            else scene.shapes()[0].bsdf()
+        fitted = [sh for sh in scene.shapes() if sh.id() == "object"][0].bsdf()
     return {"bsdf": fitted, "map": env, "rows": rows}

@@ -16,8 +16,9 @@ alternating two blocks:
   and the map's overall log scale.
 
 Units: inference sees the image divided by its usable pixels' mean
-(:func:`image_level`) and scales the map back, so that the answer does not
-depend on the image's units (the map's log bounds and ``BLACK`` are constants).
+(:func:`~mi_dsbrdf.inference.pixels.image_level`) and scales the map back, so that
+the answer does not depend on the image's units (the map's log bounds and
+``BLACK`` are constants).
 
 Start: chromaticity from the image's colour
 (:func:`~mi_dsbrdf.inference.reflectance.image_chroma_logits`) and, for each of
@@ -70,6 +71,7 @@ from mi_dsbrdf.config import Config
 from mi_dsbrdf.errors import InputError
 from mi_dsbrdf.inference.forward import TexelSum
 from mi_dsbrdf.inference.objective import Posterior
+from mi_dsbrdf.inference.pixels import image_level
 from mi_dsbrdf.inference.latlong import BLACK, resample
 from mi_dsbrdf.inference.lobes import highlight_change
 from mi_dsbrdf.inference.reflectance import image_chroma_logits, reflectance_block, reflectance_starts
@@ -133,21 +135,15 @@ def recover_envmap(texels: TexelSum, observed, mask, model, config: Config = Non
                                         max_pixels=max_pixels)
         return posteriors[key]
 
-    views = {}
+    # a view's shadow rays and bounces are traced once, for every pass that shares it
+    views = {} if texels.highlights is not None else {
+        (texels.map_size, int(round(texels.per_texel ** 0.5)), 0): texels}
 
     def view(size, samples, highlights):
-        # a view's shadow rays and bounces are traced once, whichever passes share it:
-        # ``texels`` itself where it is the map asked for, the highlight pairs added
-        # to the view without them
         key = (tuple(size), samples, highlights)
         if key not in views:
-            if highlights:
-                views[key] = view(size, samples, 0).with_highlights(highlights)
-            elif (key[0] == texels.map_size and samples ** 2 == texels.per_texel and texels.highlights is None
-                  and not texels.ray_lanes):
-                views[key] = texels
-            else:
-                views[key] = texels.with_map_size(size, samples)
+            views[key] = (view(size, samples, 0).with_highlights(highlights) if highlights
+                          else texels.with_map_size(size, samples))
         return views[key]
 
     rows = []
@@ -267,16 +263,6 @@ def constant_log_map(post, T, size) -> np.ndarray:
     image through the transport ``T`` matches the usable pixels' median level."""
     level = np.median(post.observed[post.keep]) / max(np.median(T.sum(axis=2).T[post.keep]), 1e-12)
     return np.full(tuple(size) + (3,), np.log(max(level, 1e-12)))
-
-
-def image_level(observed, mask) -> float:
-    """The mean of the usable pixels (``mask`` (H, W)) of ``observed`` (H, W, C), over
-    channels: the image's units (InputError if not finite and > 0)."""
-    px = np.asarray(observed, dtype=np.float64)[np.asarray(mask, bool)]
-    level = float(px[..., :3].mean()) if px.size else 0.0
-    if not (np.isfinite(level) and level > 0):
-        raise InputError("the usable pixels' mean must be finite and > 0, got %r" % level)
-    return level
 
 
 def alternate(post, pass_name, size, psi, logits, log_map, cfg, log) -> tuple:

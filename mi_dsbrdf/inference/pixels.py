@@ -93,3 +93,13 @@ def usable_pixels(object_mask, image, user_mask=None, white_level=None) -> np.nd
     if user_mask is not None:
         keep &= np.asarray(user_mask, bool)
     return keep & ~saturated(image, white_level)
+
+
+def image_level(observed, mask) -> float:
+    """The mean of the usable pixels (``mask`` (H, W)) of ``observed`` (H, W, C), over
+    channels: the image's units (InputError if not finite and > 0)."""
+    px = np.asarray(observed, dtype=np.float64)[np.asarray(mask, bool)]
+    level = float(px[..., :3].mean()) if px.size else 0.0
+    if not (np.isfinite(level) and level > 0):
+        raise InputError("the usable pixels' mean must be finite and > 0, got %r" % level)
+    return level
