@@ -196,21 +196,11 @@ class LobeSum:
         """Yield pixel ranges [p0, p1) of at most ``chunk`` pairs (K a pixel, each of
         ``m`` consecutive lanes of ``geometry``) and each pair's sum over its lanes of
         ``terms(lc, td, w)`` (a list of ``n_terms`` Dr.Jit Floats), as (n_terms,
-        p1 - p0, K) float32. The lanes are summed in a Dr.Jit loop: none is stored (a
-        stored lane of 39 Jacobian columns made the highlight pairs 8 times the cost
-        of the texel sum's, and a light's rays summed after evaluation 1.5 times)."""
+        p1 - p0, K) float32 (:func:`_loop_sums`)."""
         n_pixels = dr.width(geometry[0]) // (K * m)
         for p0, p1 in pixel_ranges(n_pixels, K, chunk):
             first = dr.arange(mi.UInt32, p0 * K, p1 * K) * m         # each pair's first lane
-
-            def body(j, *acc):
-                values = terms(*(dr.gather(mi.Float, a, first + j) for a in geometry))
-                return (j + 1,) + tuple(a + v for a, v in zip(acc, values))
-            state = (dr.zeros(mi.UInt32, dr.width(first)),) + tuple(dr.zeros(mi.Float, dr.width(first))
-                                                                       for _ in range(n_terms))
-            sums = dr.while_loop(state, lambda j, *acc: j < m, body)[1:]
-            dr.eval(*sums)
-            yield p0, p1, np.stack([a.numpy() for a in sums]).reshape(n_terms, p1 - p0, K)
+            yield p0, p1, _loop_sums(geometry, first, m, terms, n_terms).reshape(n_terms, p1 - p0, K)
 
     @staticmethod
     def _ragged_sums(geometry, first, counts, terms, n_terms, chunk):
@@ -219,15 +209,7 @@ class LobeSum:
         (n_terms, p1 - p0) float32: :meth:`_lane_sums` with a count a pixel."""
         P = counts.size
         for p0, p1 in pixel_ranges(P, max(1, int(np.ceil(counts.mean()))) if P else 1, chunk):
-            start, count = mi.UInt32(first[p0:p1]), mi.UInt32(counts[p0:p1])
-
-            def body(j, *acc):
-                values = terms(*(dr.gather(mi.Float, a, start + j) for a in geometry))
-                return (j + 1,) + tuple(a + v for a, v in zip(acc, values))
-            state = (dr.zeros(mi.UInt32, p1 - p0),) + tuple(dr.zeros(mi.Float, p1 - p0) for _ in range(n_terms))
-            sums = dr.while_loop(state, lambda j, *acc: j < count, body)[1:]
-            dr.eval(*sums)
-            yield p0, p1, np.stack([a.numpy() for a in sums]).reshape(n_terms, p1 - p0)
+            yield p0, p1, _loop_sums(geometry, mi.UInt32(first[p0:p1]), mi.UInt32(counts[p0:p1]), terms, n_terms)
 
     def _rgb(self, material):
         """The terms of the image: ``rgb(lc, td, w)``, weight * Eq. 4 per colour channel."""
@@ -334,6 +316,24 @@ def _jacobian_terms(lc, td, w, lk, lg, knots) -> list:
         d_kappa, d_gamma = e * u, (e * k) * (x * ex)
         terms += [w * lobe] + [d_kappa * b for b in basis] + [d_gamma * b for b in basis]
     return terms
+
+
+def _loop_sums(geometry, first, count, terms, n_terms) -> np.ndarray:
+    """(n_terms, n) float32: for each of n sums, ``terms(lc, td, w)`` (a list of
+    ``n_terms`` Dr.Jit Floats) summed over ``count`` (an int, or a UInt32 a sum)
+    consecutive lanes of ``geometry`` from lane ``first`` (UInt32, n). The lanes are
+    summed in a Dr.Jit loop: none is stored (a stored lane of 39 Jacobian columns
+    made the highlight pairs 8 times the cost of the texel sum's, and a light's rays
+    summed after evaluation 1.5 times)."""
+    n = dr.width(first)
+
+    def body(j, *acc):
+        values = terms(*(dr.gather(mi.Float, a, first + j) for a in geometry))
+        return (j + 1,) + tuple(a + v for a, v in zip(acc, values))
+    state = (dr.zeros(mi.UInt32, n),) + tuple(dr.zeros(mi.Float, n) for _ in range(n_terms))
+    sums = dr.while_loop(state, lambda j, *acc: j < count, body)[1:]
+    dr.eval(*sums)
+    return np.stack([a.numpy() for a in sums])
 
 
 def pixel_ranges(n_pixels, n_directions, pairs) -> list:
